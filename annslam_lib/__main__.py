@@ -1,0 +1,81 @@
+"""Command line of the course library.
+
+    python -m annslam_lib data fetch  [name ...]   download + verify (default: all datasets)
+    python -m annslam_lib data verify [name ...]   check the sha256 of every file; exit 1 on a problem
+    python -m annslam_lib data where  [name ...]   print the data directory (or dataset folders)
+    python -m annslam_lib data list   [name ...]   print the datasets and how to cite them
+
+Each command is a sub-parser added by an ``_add_<command>`` function that sets ``func``;
+``main`` returns the exit code.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+
+from . import fetch, registry
+from .fetch import DataError
+
+_DATA_ACTIONS = {
+    "fetch": "download missing or corrupt files and verify them",
+    "verify": "check every file's sha256 (no download); exit code 1 on any problem",
+    "where": "print the data directory (or, given names, the dataset folders)",
+    "list": "print the datasets with their citation and licence",
+}
+
+
+def _data(args: argparse.Namespace) -> int:
+    try:
+        entries = [registry.get(n) for n in args.names or registry.DATASETS]
+    except ValueError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    if args.action == "where":
+        print("\n".join(str(fetch.data_dir() / e.folder) for e in entries) if args.names
+              else fetch.data_dir())
+        return 0
+    if args.action == "list":
+        for e in entries:
+            size = sum(f.size for f in e.files) / 1e6
+            print(f"{e.name}  ({e.folder}/, {len(e.files)} files, {size:.1f} MB)\n"
+                  f"    cite:    {e.citation}\n    licence: {e.licence}\n    source:  {e.source}")
+        return 0
+    status = 0
+    for e in entries:
+        try:
+            folder = fetch.ensure(e.name, repair=True) if args.action == "fetch" else fetch.verify(e.name)
+            print(f"{e.name}: OK, {len(e.files)} files verified in {folder}")
+        except DataError as err:
+            print(f"{e.name}: FAILED\n{err}", file=sys.stderr)
+            status = 1
+    return status
+
+
+def _add_data(sub) -> None:
+    p = sub.add_parser("data", help="download, verify and locate the course data",
+                       description="\n".join(f"{k:7s} {v}" for k, v in _DATA_ACTIONS.items())
+                       + f"\n\nData directory: ${fetch.ENV_DIR}, else the per-user cache. "
+                       f"Download mirror: ${fetch.ENV_URL}/<folder>/<file>.",
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("action", choices=list(_DATA_ACTIONS))
+    p.add_argument("names", nargs="*", metavar="name",
+                   help=f"dataset(s) among {', '.join(registry.DATASETS)} (default: all)")
+    p.set_defaults(func=_data)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="python -m annslam_lib",
+                                     description="annslam course library: data and tools.")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="command")
+    _add_data(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the command line; returns the exit code."""
+    args = build_parser().parse_args(argv)
+    return args.func(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,44 @@
+"""Chapter 00 explorers: scrubbing through the raw laser scans of a run."""
+from __future__ import annotations
+
+import matplotlib.pyplot as plt
+import numpy as np
+from ipywidgets import IntSlider, interactive
+
+from ..plotting import plot_scan_vehicle_frame
+from ..records import Dataset, Laser
+
+
+def scan_summary(laser: Laser, k: int, *, max_range: float = 30.0) -> dict:
+    """What scan ``k`` holds: its time, the number of returns within ``max_range``,
+    and the number of high-intensity (tape) beams with their range span."""
+    if not 0 <= k < len(laser):
+        raise IndexError(f"scan index {k} outside 0..{len(laser) - 1}")
+    r = laser.ranges[k]
+    bright = (laser.intensity[k] > 0) & (r < laser.max_range)
+    return {
+        "scan": int(k),
+        "t": float(laser.t[k]),
+        "returns": int(np.count_nonzero(r < min(max_range, laser.max_range))),
+        "bright_beams": int(np.count_nonzero(bright)),
+        "bright_range": (float(r[bright].min()), float(r[bright].max())) if bright.any() else None,
+    }
+
+
+def scan_scrubber(ds: Dataset, *, max_range: float = 20.0, start: int = 0):
+    """A time slider over the raw laser scans of ``ds`` drawing each in the vehicle frame."""
+    if ds.laser is None:
+        raise ValueError(f"dataset {ds.name!r} has no raw laser scans to scrub through")
+    holder = {}
+
+    def draw(k: int) -> None:
+        holder["summary"] = scan_summary(ds.laser, k, max_range=max_range)
+        _, ax = plt.subplots(figsize=(7, 5))
+        plot_scan_vehicle_frame(ds.laser, k, ds.vehicle, ax=ax, max_range=max_range)
+        plt.show()
+
+    slider = IntSlider(value=start, min=0, max=len(ds.laser) - 1, step=1,
+                       description="scan", continuous_update=False)
+    widget = interactive(draw, k=slider)
+    widget.holder = holder
+    return widget

@@ -1,0 +1,66 @@
+#!/usr/bin/env bash
+# annslam course: one entry point for students, instructors and CI.
+#
+#   ./course.sh lab       set up (venv, packages, data) and open JupyterLab on the course
+#   ./course.sh test      set up and run the whole test suite (unit tests + every notebook, strict nbval)
+#   ./course.sh refresh   re-execute every notebook in place (or the ones named after it)
+#   ./course.sh setup     only set up
+#
+# Environment: PYTHON (interpreter for the venv, default python3, must be >= 3.11),
+# ANNSLAM_VENV (venv folder, default .venv), ANNSLAM_DATA (data folder; default: per-user cache).
+set -euo pipefail
+cd "$(dirname "$0")"
+
+PY=${PYTHON:-python3}
+VENV=${ANNSLAM_VENV:-.venv}
+VPY="$VENV/bin/python"
+
+# Fixed BLAS threads: last digits of floats depend on the thread count, and the
+# stored notebook outputs are compared digit for digit.
+export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 PYTHONHASHSEED=0
+
+setup() {
+    local t0=$SECONDS
+    "$PY" -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else 1)' || {
+        echo "annslam needs Python >= 3.11; $("$PY" --version 2>&1) found. Set PYTHON=/path/to/python3.11." >&2
+        exit 1
+    }
+    [ -x "$VPY" ] || "$PY" -m venv "$VENV"
+    # Reinstall only when the requirements changed (a stamp of their hash).
+    local want have=""
+    want=$("$VPY" -c 'import hashlib,sys; print(hashlib.sha256(b"".join(open(f,"rb").read() for f in sys.argv[1:])).hexdigest())' environment.txt pyproject.toml)
+    [ -f "$VENV/.annslam-installed" ] && have=$(cat "$VENV/.annslam-installed")
+    if [ "$want" != "$have" ]; then
+        echo "== installing the course environment into $VENV (torch is the CPU build)"
+        "$VPY" -m pip install --disable-pip-version-check -q -r environment.txt
+        echo "$want" > "$VENV/.annslam-installed"
+    fi
+    "$VPY" scripts/check_env.py
+    "$VPY" -m annslam_lib data fetch car_park victoria_park
+    echo "== set-up done in $((SECONDS - t0)) s"
+}
+
+cmd=${1:-lab}
+[ $# -gt 0 ] && shift
+case "$cmd" in
+    setup) setup ;;
+    lab)
+        setup
+        exec "$VENV/bin/jupyter" lab --ServerApp.root_dir=notebooks "$@" 00_course_map.ipynb
+        ;;
+    test)
+        setup
+        t0=$SECONDS
+        "$VENV/bin/ruff" check .
+        "$VPY" -m pytest "$@"
+        echo "== tests done in $((SECONDS - t0)) s"
+        ;;
+    refresh)
+        setup
+        "$VPY" scripts/refresh_notebooks.py "$@"
+        ;;
+    *)
+        echo "usage: ./course.sh [lab|test|refresh|setup]" >&2
+        exit 2
+        ;;
+esac

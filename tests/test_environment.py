@@ -1,0 +1,45 @@
+"""The environment the course runs in: exact pins, CPU-only torch, no CUDA packages."""
+import re
+from importlib import metadata
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _pins() -> dict[str, str]:
+    pins = {}
+    for raw in (ROOT / "environment.txt").read_text().splitlines():
+        line = raw.split("#", 1)[0].strip()
+        if not line or line == "-e .":
+            continue
+        m = re.fullmatch(r"([A-Za-z0-9_.\-]+)==([0-9][A-Za-z0-9.+\-]*)", line)
+        assert m, f"environment.txt: {raw!r} is not pinned to an exact version"
+        pins[m.group(1).lower()] = m.group(2)
+    return pins
+
+
+def test_every_requirement_is_pinned_and_installed_at_that_version():
+    pins = _pins()
+    for required in ("jupyterlab", "ipywidgets", "numpy", "scipy", "matplotlib", "torch",
+                     "nbval", "pytest", "sympy"):
+        assert required in pins, f"{required} missing from environment.txt"
+    for name, version in pins.items():
+        installed = metadata.version(name)
+        assert installed.split("+")[0] == version, f"{name}: pinned {version}, installed {installed}"
+
+
+def test_torch_is_the_cpu_build_without_cuda_packages():
+    torch = pytest.importorskip("torch")
+    assert torch.version.cuda is None, f"torch {torch.__version__} is a CUDA build"
+    names = [(d.metadata["Name"] or "").lower() for d in metadata.distributions()]
+    cuda = sorted(n for n in names if n.startswith(("nvidia-", "triton")))
+    assert cuda == [], f"CUDA packages installed: {cuda}"
+
+
+def test_library_is_installed_not_path_hacked():
+    import annslam_lib
+    assert Path(annslam_lib.__file__).resolve().parent == ROOT / "annslam_lib"
+    dist = metadata.distribution("annslam")
+    assert dist.read_text("direct_url.json") and '"editable": true' in dist.read_text("direct_url.json")

@@ -1,0 +1,198 @@
+"""Download, verification and CLI of the data layer, against a real local HTTP server.
+
+Each test uses its own data dir (tmp_path) and a registry with two tiny datasets,
+so the user's cache and the real registry are never touched."""
+import functools
+import hashlib
+import http.server
+import os
+import re
+import socket
+import threading
+from pathlib import Path
+
+import platformdirs
+import pytest
+
+from annslam_lib import fetch, registry
+from annslam_lib.__main__ import main
+from annslam_lib.fetch import DataError
+from annslam_lib.registry import DataFile, DatasetEntry
+
+GOOD = b"annslam test payload\n" * 500
+SHA = hashlib.sha256(GOOD).hexdigest()
+FIX = "python -m annslam_lib data fetch"
+
+
+class _Handler(http.server.SimpleHTTPRequestHandler):
+    requests: list[str] = []
+
+    def do_GET(self):
+        self.requests.append(self.path)
+        super().do_GET()
+
+    def log_message(self, *args):  # keep the test output clean
+        pass
+
+
+@pytest.fixture
+def server(tmp_path):
+    """A static file server on 127.0.0.1 (free port) serving ``www/``:
+    ``tiny/good.bin`` (correct bytes) and ``broken/bad.bin`` (one byte flipped)."""
+    www = tmp_path / "www"
+    for folder, name, data in (("tiny", "good.bin", GOOD), ("broken", "bad.bin", b"X" + GOOD[1:])):
+        (www / folder).mkdir(parents=True)
+        (www / folder / name).write_bytes(data)
+    _Handler.requests = []
+    httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), functools.partial(_Handler, directory=www))
+    thread = threading.Thread(target=httpd.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True)
+    thread.start()
+    yield f"http://127.0.0.1:{httpd.server_address[1]}"
+    httpd.shutdown()
+    httpd.server_close()
+    thread.join(timeout=5)
+
+
+def _closed_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture
+def data(tmp_path, monkeypatch, server):
+    """Data dir ``tmp_path/data``, mirror = the local server, registry = two tiny datasets."""
+    entry = functools.partial(DatasetEntry, citation="test", licence="test", source="test")
+    url = f"http://127.0.0.1:{_closed_port()}/unused"  # registry URLs must not be used here
+    monkeypatch.setattr(registry, "DATASETS", {
+        "tiny": entry(name="tiny", folder="tiny", files=(DataFile("good.bin", SHA, len(GOOD), url),)),
+        "broken": entry(name="broken", folder="broken", files=(DataFile("bad.bin", SHA, len(GOOD), url),)),
+    })
+    monkeypatch.setenv("ANNSLAM_DATA", str(tmp_path / "data"))
+    monkeypatch.setenv("ANNSLAM_DATA_URL", server)
+    return tmp_path / "data"
+
+
+def test_data_dir_resolution(monkeypatch, tmp_path):
+    monkeypatch.delenv("ANNSLAM_DATA", raising=False)
+    assert fetch.data_dir() == Path(platformdirs.user_cache_dir("annslam")) / "data"
+    monkeypatch.setenv("ANNSLAM_DATA", str(tmp_path))
+    assert fetch.data_dir() == tmp_path
+    assert fetch.dataset_dir("victoria_park") == tmp_path / "acfr_victoria_park"
+
+
+def test_urls(monkeypatch):
+    monkeypatch.delenv("ANNSLAM_DATA_URL", raising=False)
+    assert fetch.url("car_park", "data_set.mat") == (
+        "https://raw.githubusercontent.com/yuzehai1995/hwork_SLAM/"
+        "b4715234d795a5dd8155371e99b71f99803eb551/hw4_slam/data_set.mat")
+    monkeypatch.setenv("ANNSLAM_DATA_URL", "file:///mirror/")
+    assert fetch.url("car_park", "data_set.mat") == "file:///mirror/acfr_car_park/data_set.mat"
+    pattern = re.compile(r"https://raw\.githubusercontent\.com/[\w.-]+/[\w.-]+/[0-9a-f]{40}/(.+/)?(.+)")
+    for entry in registry.DATASETS.values():
+        for f in entry.files:
+            m = pattern.fullmatch(f.url)
+            assert m and m.group(2) == f.name and re.fullmatch(r"[0-9a-f]{64}", f.sha256)
+
+
+def test_registry_matches_the_shipped_sha256sums():
+    root = os.environ.get("ANNSLAM_DATA")
+    if not root:
+        pytest.skip("ANNSLAM_DATA is not set: no reference SHA256SUMS to compare with")
+    for entry in registry.DATASETS.values():
+        sums = dict(line.split()[::-1] for line in (Path(root) / entry.folder / "SHA256SUMS").open())
+        for f in entry.files:
+            assert sums[f.name] == f.sha256
+            assert (Path(root) / entry.folder / f.name).stat().st_size == f.size
+
+
+def test_download_verifies_and_leaves_no_temp_files(data):
+    p = fetch.path("tiny", "good.bin", progress=False)
+    assert p == data / "tiny" / "good.bin" and p.read_bytes() == GOOD
+    assert os.listdir(data / "tiny") == ["good.bin"]
+    assert _Handler.requests == ["/tiny/good.bin"]
+    assert fetch.ensure("tiny") == data / "tiny"  # present and verified: no second request
+    assert _Handler.requests == ["/tiny/good.bin"]
+
+
+def test_corrupt_download_raises_and_saves_nothing(data):
+    with pytest.raises(DataError) as err:
+        fetch.ensure("broken", progress=False)
+    msg = str(err.value)
+    assert SHA in msg and hashlib.sha256(b"X" + GOOD[1:]).hexdigest() in msg
+    assert f"{FIX} broken" in msg and "ANNSLAM_DATA" in msg and "bad.bin" in msg
+    assert os.listdir(data / "broken") == []
+
+
+@pytest.mark.parametrize("where", ["mirror", "registry"])
+def test_unreachable_server_is_a_data_error(data, monkeypatch, where):
+    dead = f"http://127.0.0.1:{_closed_port()}"
+    if where == "mirror":
+        monkeypatch.setenv("ANNSLAM_DATA_URL", dead)
+    else:  # no mirror: the registry URL is used
+        monkeypatch.delenv("ANNSLAM_DATA_URL")
+        f = DataFile("good.bin", SHA, len(GOOD), f"{dead}/good.bin")
+        monkeypatch.setitem(registry.DATASETS, "tiny", DatasetEntry("tiny", "tiny", (f,), "", "", ""))
+    with pytest.raises(DataError, match=rf"(?s)cannot download .*{dead}.*{SHA}.*{FIX} tiny"):
+        fetch.path("tiny", "good.bin", progress=False)
+    assert not (data / "tiny" / "good.bin").exists()
+    assert not any((data / "tiny").iterdir())
+
+
+def test_missing_on_server_is_a_data_error(data, monkeypatch):
+    monkeypatch.setenv("ANNSLAM_DATA_URL", os.environ["ANNSLAM_DATA_URL"] + "/nowhere")
+    with pytest.raises(DataError, match="404"):
+        fetch.ensure("tiny", progress=False)
+
+
+def test_existing_corrupt_file_raises_until_repaired(data):
+    (data / "tiny").mkdir(parents=True)
+    (data / "tiny" / "good.bin").write_bytes(GOOD[:-1])
+    with pytest.raises(DataError, match=rf"(?s)'good.bin'.*corrupt.*expected sha256: {SHA}.*{FIX} tiny"):
+        fetch.path("tiny", "good.bin")
+    assert _Handler.requests == []  # not silently replaced
+    fetch.ensure("tiny", repair=True, progress=False)
+    assert (data / "tiny" / "good.bin").read_bytes() == GOOD
+
+
+def test_a_changed_file_is_hashed_again(data):
+    p = fetch.path("tiny", "good.bin", progress=False)
+    p.write_bytes(b"Y" + GOOD[1:])  # same size; a new mtime invalidates the cached verification
+    os.utime(p, ns=(0, 0))
+    with pytest.raises(DataError, match="corrupt"):
+        fetch.verify("tiny")
+
+
+def test_read_only_data_dir_with_a_missing_file(data):
+    (data / "tiny").mkdir(parents=True)
+    (data / "tiny").chmod(0o555)
+    try:
+        with pytest.raises(DataError, match=rf"(?s)read-only.*{SHA}"):
+            fetch.ensure("tiny", progress=False)
+    finally:
+        (data / "tiny").chmod(0o755)
+    assert _Handler.requests == [] and not any((data / "tiny").iterdir())
+
+
+def test_cli(data, capsys):
+    assert main(["data", "verify", "tiny"]) == 1
+    assert f"{FIX} tiny" in capsys.readouterr().err
+    assert main(["data", "fetch", "tiny"]) == 0
+    assert main(["data", "verify", "tiny"]) == 0
+    (data / "tiny" / "good.bin").write_bytes(b"corrupt")
+    assert main(["data", "verify"]) == 1  # all datasets: tiny corrupt, broken missing
+    err = capsys.readouterr().err
+    assert "tiny: FAILED" in err and "broken: FAILED" in err and SHA in err
+    assert main(["data", "fetch", "tiny"]) == 0 and main(["data", "verify", "tiny"]) == 0
+    assert main(["data", "fetch"]) == 1  # broken cannot be fetched
+    assert main(["data", "verify", "nope"]) == 2
+    assert "known datasets: tiny, broken" in capsys.readouterr().err
+    assert main(["data", "where"]) == 0 and capsys.readouterr().out.strip() == str(data)
+    assert main(["data", "list", "tiny"]) == 0 and "cite:    test" in capsys.readouterr().out
+
+
+def test_unknown_dataset_lists_the_known_names():
+    with pytest.raises(ValueError, match="unknown dataset 'nope'; known datasets: car_park, victoria_park, mrclam7"):
+        fetch.ensure("nope")
+    with pytest.raises(ValueError, match="has no file 'x.mat'; its files are: data_set.mat, beac_juan3.mat"):
+        fetch.path("car_park", "x.mat")

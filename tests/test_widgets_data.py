@@ -1,0 +1,59 @@
+"""Chapter 00 helpers: the scan summary, the scan scrubber (headless) and the scan plot."""
+import matplotlib
+
+matplotlib.use("Agg")  # headless: set in the test, never exported to notebook kernels
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+import scipy.io  # noqa: E402
+
+from annslam_lib import fetch, plotting, simulate, widgets  # noqa: E402
+
+
+def test_scan_summary_counts_match_the_raw_file(car_park):
+    raw = scipy.io.loadmat(fetch.dataset_dir("car_park") / "data_set.mat")
+    k = 150
+    s = widgets.scan_summary(car_park.laser, k, max_range=20)
+    assert s["bright_beams"] == np.count_nonzero(raw["Intensity"][k] > 0) == 2
+    assert s["returns"] == np.count_nonzero(raw["Laser"][k] < 20)
+    assert s["t"] == pytest.approx(raw["TimeLaser"].ravel()[k] - car_park.info["time_offset_s"], abs=1e-9)
+    bright = raw["Laser"][k][raw["Intensity"][k] > 0]
+    assert s["bright_range"] == pytest.approx((bright.min(), bright.max()))
+
+
+def test_scan_scrubber_follows_the_slider(car_park):
+    w = widgets.scan_scrubber(car_park, start=10)
+    assert w.holder["summary"]["scan"] == 10
+    w.children[0].value = 300
+    assert w.holder["summary"] == widgets.scan_summary(car_park.laser, 300, max_range=20)
+    assert w.children[0].max == len(car_park.laser) - 1
+    plt.close("all")
+
+
+def test_scan_scrubber_and_summary_reject_bad_input(victoria_park, car_park):
+    with pytest.raises(ValueError, match="no raw laser"):
+        widgets.scan_scrubber(victoria_park)
+    with pytest.raises(IndexError, match="outside 0..585"):
+        widgets.scan_summary(car_park.laser, 586)
+
+
+def test_scan_plot_puts_tape_returns_in_the_vehicle_frame():
+    # One pole straight ahead of the laser at 6 m: its bright return must be drawn at
+    # x = a + 6, y = b in the rear-axle frame.
+    ds = simulate.simulate(seed=1, beacons=np.array([[0.0, 0.0]]), sigma_range=0.0,
+                           sigma_bearing=0.0, laps=1)
+    k = int(np.argmax((ds.laser.intensity > 0).sum(axis=1)))
+    ax = plotting.plot_scan_vehicle_frame(ds.laser, k, ds.vehicle, max_range=30)
+    bright = ax.collections[0].get_offsets()
+    r, beta = ds.laser.ranges[k], ds.laser.angles
+    hit = ds.laser.intensity[k] > 0
+    expected = np.column_stack([ds.vehicle.a + r[hit] * np.sin(beta[hit]), ds.vehicle.b - r[hit] * np.cos(beta[hit])])
+    np.testing.assert_allclose(bright, expected, atol=1e-12)
+    # ...and those points are where the true pole is, seen from the true laser pose.
+    x, y, phi = ds.info["scan_poses"][k]  # true laser pose (x, y, phi) at scan k
+    c, s = np.cos(phi), np.sin(phi)
+    laser_xy = expected - [ds.vehicle.a, ds.vehicle.b]
+    world = np.column_stack([x + c * laser_xy[:, 0] - s * laser_xy[:, 1], y + s * laser_xy[:, 0] + c * laser_xy[:, 1]])
+    assert np.all(np.hypot(*(world - ds.beacons[0]).T) <= 0.1 + 1e-9)  # on the pole's surface (radius 0.1 m)
+    plt.close("all")
