@@ -36,7 +36,7 @@ setup() {
         echo "$want" > "$VENV/.annslam-installed"
     fi
     "$VPY" scripts/check_env.py
-    "$VPY" -m annslam_lib data fetch car_park victoria_park
+    "$VPY" -m annslam_lib data fetch
     echo "== set-up done in $((SECONDS - t0)) s"
 }
 
@@ -46,7 +46,9 @@ case "$cmd" in
     setup) setup ;;
     lab)
         setup
-        exec "$VENV/bin/jupyter" lab --ServerApp.root_dir=notebooks "$@" 00_course_map.ipynb
+        extra=()
+        [ "$(id -u)" = 0 ] && extra+=(--allow-root)  # containers often run as root; Jupyter refuses without it
+        exec "$VENV/bin/jupyter" lab --ServerApp.root_dir=notebooks "${extra[@]}" "$@" 00_course_map.ipynb
         ;;
     test)
         setup

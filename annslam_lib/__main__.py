@@ -1,6 +1,7 @@
 """Command line of the course library.
 
-    python -m annslam_lib data fetch  [name ...]   download + verify (default: all datasets)
+    python -m annslam_lib data fetch  [name ...]   download + verify (default: the course's datasets)
+    python -m annslam_lib errata                   the paper's errata as a Markdown table
     python -m annslam_lib data verify [name ...]   check the sha256 of every file; exit 1 on a problem
     python -m annslam_lib data where  [name ...]   print the data directory (or dataset folders)
     python -m annslam_lib data list   [name ...]   print the datasets and how to cite them
@@ -26,7 +27,8 @@ _DATA_ACTIONS = {
 
 def _data(args: argparse.Namespace) -> int:
     try:
-        entries = [registry.get(n) for n in args.names or registry.DATASETS]
+        default = registry.core() if args.action in ("fetch", "verify") else registry.DATASETS
+        entries = [registry.get(n) for n in args.names or default]
     except ValueError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
@@ -59,8 +61,21 @@ def _add_data(sub) -> None:
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("action", choices=list(_DATA_ACTIONS))
     p.add_argument("names", nargs="*", metavar="name",
-                   help=f"dataset(s) among {', '.join(registry.DATASETS)} (default: all)")
+                   help=f"dataset(s) among {', '.join(registry.DATASETS)} (default for fetch "
+                        f"and verify: {', '.join(registry.core())}; for where and list: all)")
     p.set_defaults(func=_data)
+
+
+def _errata(args: argparse.Namespace) -> int:
+    from .paper import errata_markdown  # computes the numerical proofs (about a second)
+
+    print(errata_markdown())
+    return 0
+
+
+def _add_errata(sub) -> None:
+    p = sub.add_parser("errata", help="print the paper's errata with their numerical proofs")
+    p.set_defaults(func=_errata)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -68,6 +83,7 @@ def build_parser() -> argparse.ArgumentParser:
                                      description="annslam course library: data and tools.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="command")
     _add_data(sub)
+    _add_errata(sub)
     return parser
 
 

@@ -28,7 +28,7 @@ from .geometry import as_array, from_frame, to_frame, wrap_angle
 from .vehicle import ACFR_UTE, Vehicle
 
 __all__ = [
-    "Erratum", "ERRATA", "CONFIRMED", "errata_table",
+    "Erratum", "ERRATA", "CONFIRMED", "errata_table", "errata_markdown",
     "rate_2_2_printed", "predict_2_2_printed",
     "two_point_theta_printed", "two_point_ij_printed", "two_point_transform_printed",
     "laser_position_printed", "full_state_printed", "speed_translation_printed",
@@ -718,3 +718,24 @@ def errata_table(entries: list[Erratum] | None = None) -> list[dict]:
             "how_proven": e.how_proven, "note": e.note,
         })
     return rows
+
+
+def _fmt_error(x: float | None) -> str:
+    return "—" if x is None else f"{x:.2g}"
+
+
+def errata_markdown(entries: list[Erratum] | None = None) -> str:
+    """The errata as a Markdown table (the README's table is this output, tested):
+    section, quantity, printed form, correct form, kind, and the measured
+    discrepancy of the printed and the corrected form (see :class:`Erratum`)."""
+    def cell(text: str) -> str:
+        # LaTeX's norm bars would end the table cell: write them as \Vert.
+        return text.replace(r"\|", r"\Vert ").replace("|", r"\|").replace("\n", " ")
+
+    lines = ["| § | quantity | printed | correct | kind | error printed | error corrected |",
+             "|---|---|---|---|---|---|---|"]
+    for r in errata_table(entries):
+        lines.append(f"| {r['section']} | {cell(r['quantity'])} | ${cell(r['printed'])}$ | "
+                     f"${cell(r['correct'])}$ | {r['kind']} | {_fmt_error(r['printed_error'])} | "
+                     f"{_fmt_error(r['corrected_error'])} |")
+    return "\n".join(lines)

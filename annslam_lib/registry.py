@@ -29,6 +29,7 @@ class DatasetEntry:
     citation: str
     licence: str
     source: str
+    optional: bool = False  # not fetched unless named (not used by the core chapters)
 
     def file(self, filename: str) -> DataFile:
         for f in self.files:
@@ -123,8 +124,14 @@ DATASETS: dict[str, DatasetEntry] = {
                  "Robotics Research, 30(8):969-974, 2011.",
         licence="No licence statement found; published by UTIAS for research use with citation.",
         source=f"github.com/{_MR_REPO} @ {_MR_COMMIT[:12]} (data/MRCLAM_Dataset7/), bytes unchanged",
+        optional=True,
     ),
 }
+
+
+def core() -> list[str]:
+    """Names of the datasets the course needs (fetched by default)."""
+    return [name for name, entry in DATASETS.items() if not entry.optional]
 
 
 def get(name: str) -> DatasetEntry:

@@ -1,0 +1,34 @@
+"""The README stays true: its errata table is the library's, its commands exist."""
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+from annslam_lib import paper
+
+ROOT = Path(__file__).resolve().parents[1]
+README = (ROOT / "README.md").read_text()
+
+
+def test_readme_errata_table_is_the_library_table():
+    block = re.search(r"<!-- errata:begin -->\n(.*?)\n<!-- errata:end -->", README, re.S)
+    assert block, "README lost its errata markers"
+    assert block.group(1).strip() == paper.errata_markdown().strip(), (
+        "README errata table is stale: paste the output of `python -m annslam_lib errata`")
+    assert block.group(1).count("\n| ") == len(paper.ERRATA)
+
+
+def test_errata_command_prints_the_table():
+    out = subprocess.run([sys.executable, "-m", "annslam_lib", "errata"], capture_output=True,
+                         text=True, check=True).stdout
+    assert out.strip() == paper.errata_markdown().strip()
+
+
+def test_readme_commands_and_notebooks_exist():
+    assert "./course.sh lab" in README and "./course.sh test" in README
+    assert (ROOT / ".ci" / "run").read_text().rstrip().endswith("exec ./course.sh test")
+    for nb in re.findall(r"\(notebooks/([0-9]{2}_[a-z_]+\.ipynb)\)", README):
+        assert (ROOT / "notebooks" / nb).exists(), f"README links a missing notebook {nb}"
+    on_disk = sorted(p.name for p in (ROOT / "notebooks").glob("*.ipynb"))
+    linked = sorted(set(re.findall(r"\(notebooks/([0-9]{2}_[a-z_0-9]+\.ipynb)\)", README)))
+    assert on_disk == linked, f"README notebook map {linked} differs from notebooks/ {on_disk}"
