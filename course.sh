@@ -48,7 +48,7 @@ case "$cmd" in
         setup
         extra=()
         [ "$(id -u)" = 0 ] && extra+=(--allow-root)  # containers often run as root; Jupyter refuses without it
-        exec "$VENV/bin/jupyter" lab --ServerApp.root_dir=notebooks "${extra[@]}" "$@" 00_course_map.ipynb
+        exec "$VENV/bin/jupyter" lab --ServerApp.root_dir=notebooks "${extra[@]}" "$@" "$PWD/notebooks/00_course_map.ipynb"
         ;;
     test)
         setup
