@@ -143,9 +143,11 @@ class Detections:
     """Point-feature detections, a ragged list of scans stored flat (CSR style).
 
     Scan ``k`` owns rows ``offsets[k]:offsets[k+1]`` of ``range`` (m), ``bearing``
-    (rad, 0..pi from the vehicle's right) and ``diameter`` (m; NaN where the
-    source has none). ``landmark_id`` is the true landmark of each detection
-    where it is known (simulator), else -1.
+    (rad, 0..pi from the vehicle's right) and ``diameter`` (m: trunk diameter, or
+    the chord width of a beacon's cluster; NaN where the source has none).
+    ``landmark_id`` is the true landmark of each detection where it is known
+    (simulator), else -1; ``intensity`` the reflectivity level 0..4 where the
+    source has one (beacons extracted from raw laser), else 0.
     """
 
     t: np.ndarray
@@ -154,6 +156,7 @@ class Detections:
     bearing: np.ndarray
     diameter: np.ndarray
     landmark_id: np.ndarray | None = None
+    intensity: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         t = _as_1d("detections.t", self.t)
@@ -176,6 +179,10 @@ class Detections:
         object.__setattr__(self, "bearing", _as_1d("detections.bearing", self.bearing, n))
         object.__setattr__(self, "diameter", _as_1d("detections.diameter", self.diameter, n, finite=False))
         object.__setattr__(self, "landmark_id", ids)
+        level = np.zeros(n, dtype=np.uint8) if self.intensity is None else np.asarray(self.intensity)
+        if level.shape != (n,):
+            raise ValueError(f"detections.intensity must have {n} entries, got {level.shape}")
+        object.__setattr__(self, "intensity", level.astype(np.uint8))
 
     def __len__(self) -> int:
         """Number of scans."""
