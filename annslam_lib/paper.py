@@ -495,7 +495,7 @@ ERRATA: list[Erratum] = [
             "wrong equation", _c_rate22, _c_rate22_ok),
     Erratum("2.2-symbols", "2.2", "symbols of the motion model",
             r"\dot\phi = v\tan\gamma / I;\; V, v;\; \gamma",
-            r"\dot\phi = V\tan\alpha / L (one speed V, wheelbase L, steering alpha as in 4.1)",
+            r"\dot\phi = V\tan\alpha / L\;\text{(one speed } V\text{, wheelbase } L\text{, steering } \alpha \text{ as in 4.1)}",
             "notation: the wheelbase is printed I in the rate and L in the discrete model, "
             "the speed V and v, the steering gamma here and alpha in 4.1 (where gamma "
             "becomes the range).", "notation"),
@@ -523,7 +523,7 @@ ERRATA: list[Erratum] = [
     Erratum("3.3-theta-vertical", "3.3", "vertical case of theta",
             r"\theta = -\pi/2 \;\text{si}\; X_l = X_r",
             r"\theta = -\pi/2 \text{ if } y_r < y_l,\; +\pi/2 \text{ if } y_r > y_l "
-            r"(undefined if the points coincide)",
+            r"\;\text{(undefined if the points coincide)}",
             "400 seeded vertical pairs of both orientations: the printed value is off by pi "
             "whenever y_r > y_l.",
             "ambiguous", _c_theta_vertical, _c_theta_ok("vertical"),

@@ -1,0 +1,89 @@
+"""Chapter 01 explorer (annslam_lib.widgets.kinematics), driven headless."""
+import math
+
+import matplotlib
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+
+from annslam_lib.vehicle import ACFR_UTE, Vehicle
+from annslam_lib.widgets import kinematics as wk
+
+matplotlib.use("Agg")
+
+
+@pytest.fixture
+def explorer():
+    w = wk.kinematics_explorer(speed=2.0, steering=0.3, dt=0.2)
+    yield w
+    plt.close("all")
+
+
+def slider(widget, name):
+    return next(c for c in widget.children if getattr(c, "description", "").startswith(name))
+
+
+def test_moving_the_steering_slider_changes_the_radius(explorer):
+    """The radius is MEASURED on the drawn exact arc (circle through three of its points),
+    so it checks R = L / tan(alpha) for the rear axle and, for the laser, the distance
+    from the instantaneous centre (0, R) to the laser at (a, b): sqrt(a^2 + (R - b)^2)."""
+    a, b, L = ACFR_UTE.a, ACFR_UTE.b, ACFR_UTE.L
+    for alpha in (0.3, 0.5, -0.2, 0.05, -0.55):
+        slider(explorer, "steer").value = alpha
+        s = explorer.holder["summary"]
+        R = L / math.tan(alpha)
+        assert s["radius_axle"] == pytest.approx(abs(R), abs=1e-9)
+        assert s["radius_laser"] == pytest.approx(math.hypot(a, R - b), abs=1e-9)
+        assert s["radius_formula"] == pytest.approx(abs(R), abs=1e-12)
+
+
+def test_straight_ahead_has_no_radius_and_no_euler_error(explorer):
+    slider(explorer, "steer").value = 0.0
+    s = explorer.holder["summary"]
+    assert math.isinf(s["radius_axle"]) and math.isinf(s["radius_laser"])
+    assert s["error_laser"] < 1e-12 and s["error_axle"] < 1e-12
+
+
+def test_euler_error_is_first_order_in_dt(explorer):
+    """Over a fixed horizon the Euler end-point error halves with dt (global error O(dt))."""
+    slider(explorer, "steer").value = 0.4
+    errs = []
+    for dt in (0.4, 0.2, 0.1, 0.05):
+        slider(explorer, "dt").value = dt
+        s = explorer.holder["summary"]
+        assert s["steps"] == round(4.0 / dt) and s["horizon"] == pytest.approx(4.0)
+        errs.append(s["error_laser"])
+    ratios = np.array(errs[:-1]) / np.array(errs[1:])
+    assert np.all((ratios > 1.8) & (ratios < 2.2))
+
+
+def test_speed_slider_scales_the_path(explorer):
+    """Same steering, double speed: the same circle, twice the arc, so the heading turned
+    at the end doubles (v tan(alpha) / L times the horizon)."""
+    slider(explorer, "steer").value = 0.25
+    slider(explorer, "speed").value = 1.0
+    one = explorer.holder["summary"]["exact_axle"][-1, 2]
+    slider(explorer, "speed").value = 2.0
+    two = explorer.holder["summary"]["exact_axle"][-1, 2]
+    assert one == pytest.approx(1.0 * math.tan(0.25) / ACFR_UTE.L * 4.0, abs=1e-12)
+    assert two == pytest.approx(2 * one, abs=1e-12)
+
+
+def test_arc_vs_euler_rear_axle_is_the_2_2_model():
+    s = wk.arc_vs_euler(1.5, -0.3, 0.1, Vehicle(), horizon=1.0)
+    eu = s["euler_axle"]
+    w = 1.5 * math.tan(-0.3) / ACFR_UTE.L
+    expect = [0.0, 0.0, 0.0]
+    for _ in range(s["steps"]):
+        expect = [expect[0] + 0.1 * 1.5 * math.cos(expect[2]),
+                  expect[1] + 0.1 * 1.5 * math.sin(expect[2]), expect[2] + 0.1 * w]
+    np.testing.assert_allclose(eu[-1], expect, atol=1e-12)
+
+
+def test_circumradius_and_bad_input():
+    assert wk.circumradius([1, 0], [0, 1], [-1, 0]) == pytest.approx(1.0, abs=1e-15)
+    assert math.isinf(wk.circumradius([0, 0], [1, 1], [2, 2]))
+    for kwargs in (dict(dt=0.0), dict(dt=float("nan")), dict(horizon=-1.0), dict(dt=1e-6)):
+        args = dict(speed=1.0, steering=0.1, dt=0.1) | kwargs
+        with pytest.raises(ValueError):
+            wk.arc_vs_euler(**args)

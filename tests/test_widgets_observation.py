@@ -1,0 +1,116 @@
+"""Chapter 03 explorer (annslam_lib.widgets.observation), headless: the pure function's
+S = H P H^T + R against an independent Monte Carlo, and the sliders."""
+import math
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from annslam_lib.widgets import observation as wobs  # noqa: E402
+
+
+@pytest.fixture(autouse=True)
+def _close_figures():
+    yield
+    plt.close("all")
+
+
+def reference_measurements(pose, landmark, P, R, n, seed):
+    """Independent Monte Carlo: sample (pose, landmark) and the laser noise with NumPy,
+    range and laser bearing by complex numbers (no library code)."""
+    rng = np.random.default_rng(seed)
+    x = np.r_[pose, landmark] + rng.standard_normal((n, 5)) * np.sqrt(np.diag(P))
+    d = (x[:, 3] - x[:, 0]) + 1j * (x[:, 4] - x[:, 1])
+    z = np.c_[np.abs(d), np.angle(d * np.exp(-1j * x[:, 2]) * 1j)]
+    return z + rng.standard_normal((n, 2)) * np.sqrt(np.diag(R))
+
+
+@pytest.mark.parametrize("landmark", [(10.0, 3.0), (-4.0, 6.0), (25.0, -12.0)])
+def test_S_matches_independent_monte_carlo_at_small_sigma(landmark):
+    s = wobs.measurement_prediction(*landmark, sigma_xy=0.05, sigma_phi=math.radians(1.0),
+                                    sigma_landmark=0.05)
+    d = complex(*landmark)
+    assert s["range"] == pytest.approx(abs(d), rel=1e-12)
+    assert s["bearing"] == pytest.approx(np.angle(d * 1j), abs=1e-12)
+    z = reference_measurements(wobs.POSE, landmark, s["P"], s["R"], 200_000, seed=11)
+    e = z - s["z"]
+    e[:, 1] = np.angle(np.exp(1j * e[:, 1]))
+    C = np.cov(e, rowvar=False)
+    sd = np.sqrt(np.diag(s["S"]))
+    # variances within 2 % (sampling error ~0.3 %), correlation coefficient within 0.01
+    np.testing.assert_allclose(np.diag(C), np.diag(s["S"]), rtol=0.02)
+    assert C[0, 1] / (sd[0] * sd[1]) == pytest.approx(s["correlation"], abs=0.01)
+    assert abs(e.mean(axis=0)[0]) < 0.02 * sd[0] + 1e-3
+
+
+def test_heading_enters_the_bearing_linearly():
+    """With only heading and laser noise, S is exactly diag(sr^2, sphi^2 + sb^2)."""
+    s = wobs.measurement_prediction(8.0, -2.0, sigma_xy=0.0, sigma_phi=0.3, sigma_range=0.1,
+                                    sigma_bearing=0.02)
+    np.testing.assert_allclose(s["S"], np.diag([0.1**2, 0.3**2 + 0.02**2]), atol=1e-15)
+
+
+def test_position_sigma_shrinks_in_bearing_with_range():
+    """Position noise sigma perpendicular to the line of sight moves the bearing by
+    sigma / r: the bearing variance from position alone is sigma^2 / r^2."""
+    for r in (2.0, 10.0, 40.0):
+        s = wobs.measurement_prediction(r, 0.0, sigma_xy=0.4, sigma_phi=0.0, sigma_range=0.0,
+                                        sigma_bearing=0.0)
+        np.testing.assert_allclose(s["S"], np.diag([0.4**2, 0.4**2 / r**2]), rtol=1e-12,
+                                   atol=1e-15)
+
+
+def test_bad_input_is_rejected():
+    with pytest.raises(ValueError, match="sigma_xy"):
+        wobs.measurement_prediction(5.0, 0.0, sigma_xy=-0.1, sigma_phi=0.1)
+    with pytest.raises(ValueError, match="sigma_phi"):
+        wobs.measurement_prediction(5.0, 0.0, sigma_xy=0.1, sigma_phi=float("nan"))
+    with pytest.raises(ValueError, match="bearing undefined"):
+        wobs.measurement_prediction(0.0, 0.0, sigma_xy=0.1, sigma_phi=0.1)
+
+
+def sliders(w):
+    return {c.description: c for c in w.children[:-1]}
+
+
+def test_explorer_summary_follows_the_sliders():
+    w = wobs.measurement_explorer(landmark=(10.0, 0.0), sigma_xy=0.3, sigma_phi_deg=2.0,
+                                  n_samples=4000)
+    s0 = w.holder["summary"]
+    assert s0["range"] == pytest.approx(10.0) and s0["bearing"] == pytest.approx(np.pi / 2)
+    # small sigmas: the Monte-Carlo cloud fills the 2-sigma ellipse like a Gaussian
+    assert s0["mc_coverage"] == pytest.approx(0.8647, abs=0.025)
+    np.testing.assert_allclose(s0["mc_sd_ratio"], 1.0, atol=0.05)
+    sl = sliders(w)
+
+    sl["landmark x"].value = 30.0          # farther: range grows, bearing spread shrinks
+    s1 = w.holder["summary"]
+    assert s1["range"] == pytest.approx(30.0)
+    assert s1["sigma_bearing"] < s0["sigma_bearing"]
+    assert s1["sigma_range"] == pytest.approx(s0["sigma_range"], rel=1e-12)
+
+    sl["σ heading°"].value = 10.0           # the heading adds exactly to the bearing variance
+    s2 = w.holder["summary"]
+    assert s2["sigma_bearing"]**2 - s1["sigma_bearing"]**2 == pytest.approx(
+        math.radians(10.0)**2 - math.radians(2.0)**2, rel=1e-9)
+
+    sl["landmark x"].value = 20.0
+    sl["landmark y"].value = 20.0           # 45 degrees to the left: bearing 135 degrees
+    assert w.holder["summary"]["bearing"] == pytest.approx(math.radians(135.0))
+
+    sl["landmark x"].value = 0.0
+    sl["landmark y"].value = 0.0            # on the sensor: a message, not a crash
+    assert "bearing undefined" in w.holder["summary"]["error"]
+
+
+def test_explorer_shows_the_linearisation_failing_close_to_a_vague_pose():
+    """Landmark 0.5 m away, position sigma 0.5 m: the true bearing spread is far wider
+    and the range spread narrower than the Jacobian predicts (a Rice-like range)."""
+    w = wobs.measurement_explorer(landmark=(0.5, 0.0), sigma_xy=0.5, sigma_phi_deg=0.0,
+                                  n_samples=4000)
+    ratio = w.holder["summary"]["mc_sd_ratio"]
+    assert ratio[0] < 0.85 and ratio[1] > 1.05
