@@ -1,0 +1,118 @@
+"""EKF-SLAM timings: the efficient filter (annslam_lib.ekf_slam) against the dense textbook
+reference (annslam_lib.ekf_dense), and whole runs of the real data.
+
+    OMP_NUM_THREADS=1 ANNSLAM_DATA=/work/shared/data python benchmarks/bench_ekf_slam.py [--quick]
+
+Prints figures only (not a test: timings depend on the machine and its load).
+- per step (one odometry prediction + one update with one observation) at N = 50, 150,
+  300 landmarks, both filters measured in the same run, and the ratio;
+- the Car Park and the full Victoria Park run with their default configurations
+  (best of three; wall and CPU time).
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import time
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+from annslam_lib import datasets, ekf_slam, metrics  # noqa: E402
+from annslam_lib.ekf_dense import DenseEkfSlam  # noqa: E402
+from annslam_lib.observation import observe  # noqa: E402
+from annslam_lib.records import Odometry  # noqa: E402
+from annslam_lib.vehicle import ACFR_UTE  # noqa: E402
+
+SIGMA_R, SIGMA_B = 0.1, math.radians(1.0)
+
+
+def make_filter(cls, n_landmarks: int, seed: int = 0):
+    rng = np.random.default_rng(seed)
+    f = cls(np.array([0.0, 0.0, 0.3]), np.diag([0.01, 0.01, 0.001]), ACFR_UTE)
+    z = np.column_stack([rng.uniform(3, 40, n_landmarks), rng.uniform(0.05, 3.1, n_landmarks)])
+    f.augment(z, SIGMA_R, SIGMA_B)
+    return f
+
+
+def time_steps(f, steps: int, controls, rng) -> tuple[float, float, float]:
+    """Mean seconds per (predict, update, predict + update) over ``steps`` steps."""
+    t_pred = t_upd = 0.0
+    N = f.n_landmarks
+    for k in range(steps):
+        u = controls[k % len(controls)]
+        j = int(rng.integers(N))
+        t0 = time.perf_counter()
+        f.predict(u, 0.025)
+        f.flush()                      # the efficient filter's deferred work, counted here
+        t1 = time.perf_counter()
+        zhat, _, _ = observe(f.pose, f.landmarks()[j])
+        z = zhat + rng.normal(0, [SIGMA_R, SIGMA_B])
+        t2 = time.perf_counter()
+        f.update(z[None], [j], SIGMA_R, SIGMA_B)
+        t3 = time.perf_counter()
+        t_pred += t1 - t0
+        t_upd += t3 - t2
+    return t_pred / steps, t_upd / steps, (t_pred + t_upd) / steps
+
+
+def per_step(sizes=(50, 150, 300), quick=False) -> None:
+    odo = Odometry(t=np.arange(200) * 0.025, speed=np.full(200, 2.0),
+                   steering=0.2 * np.sin(np.arange(200) / 20))
+    controls = ekf_slam.control_table(odo, ACFR_UTE, 0.7, math.radians(7))
+    print("per step: one odometry prediction + one update with one observation")
+    print(f"{'N':>5} {'n':>5} | {'predict eff/dense (us)':>24} | {'update eff/dense (us)':>24} | "
+          f"{'step eff/dense (us)':>24} | ratio")
+    for N in sizes:
+        eff = make_filter(ekf_slam.EkfSlam, N)
+        dense = make_filter(DenseEkfSlam, N)
+        n_eff = 200 if quick else 2000
+        n_dense = max(3, int((20 if quick else 60) * (50 / N) ** 2))
+        time_steps(eff, 20, controls, np.random.default_rng(1))          # warm up
+        time_steps(dense, 2, controls, np.random.default_rng(1))
+        pe, ue, se = time_steps(eff, n_eff, controls, np.random.default_rng(2))
+        pd, ud, sd = time_steps(dense, n_dense, controls, np.random.default_rng(2))
+        print(f"{N:5d} {3 + 2 * N:5d} | {pe * 1e6:10.1f} / {pd * 1e6:11.1f} | "
+              f"{ue * 1e6:10.1f} / {ud * 1e6:11.1f} | {se * 1e6:10.1f} / {sd * 1e6:11.1f} | "
+              f"{sd / se:7.0f}x")
+
+
+def whole_run(name: str, repeats: int = 3) -> None:
+    ds = datasets.load(name)
+    cfg = ekf_slam.SlamConfig.for_dataset(name)
+    best = None
+    for _ in range(repeats):
+        w, c = time.perf_counter(), time.process_time()
+        r = ekf_slam.run(ds, cfg, progress=False)
+        wall, cpu = time.perf_counter() - w, time.process_time() - c
+        print(f"  {name}: {wall:.2f} s wall, {cpu:.2f} s CPU")
+        best = (wall, cpu, r) if best is None or wall < best[0] else best
+    wall, cpu, r = best
+    e = metrics.trajectory_errors(r.odometry_trajectory, ds.gps)
+    c = r.counts
+    print(f"  {name} best: {wall:.2f} s wall ({cpu:.2f} s CPU); {c['predicts']} predictions, "
+          f"{c['scans']} scans, {c['updates']} batch updates, {c['associated']} associated / "
+          f"{c['new']} new / {c['rejected']} rejected observations, {c['landmarks']} landmarks "
+          f"({c['landmarks_removed']} tentative removed), state size {r.state.size}")
+    print(f"  vs GPS: {e.summary()}; median {np.median(e.error):.2f} m, 90th percentile "
+          f"{np.percentile(e.error, 90):.2f} m")
+    print(f"  min eigenvalue at checkpoints {r.health['min_eig'].min():.2e}, "
+          f"max asymmetry {r.health['asymmetry'].max():.1e}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="fewer repetitions")
+    args = parser.parse_args()
+    print(f"OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS')}, numpy {np.__version__}")
+    per_step(quick=args.quick)
+    print("whole runs (default configurations)")
+    for name in ("car_park", "victoria_park"):
+        whole_run(name, 1 if args.quick else 3)
+
+
+if __name__ == "__main__":
+    main()
