@@ -60,6 +60,22 @@ Initial pose (``SlamConfig.initial_pose``)
     program's hand value was about -112 deg). The fit looks ahead ``initial_window``
     seconds, a batch step before the filter starts; with gps_mode 'init' those fixes are
     then also used as updates (counted twice, a mild optimism about the start).
+
+ANN landmark model (``SlamConfig.landmark_model = 'ann'``, ``run(..., landmark_model=m)``;
+notebook 08, ``annslam_lib.ann``)
+    The paper feeds the network's landmark position to the filter at initialisation and
+    in the update. The network's output l_ann is computed FROM the detection z (and the
+    prior pose), so it is not a second, independent measurement: using z and l_ann
+    together would count the same measurement twice. Here l_ann REPLACES z, expressed as
+    the range-bearing pseudo-measurement z' = h(prior pose, l_ann) (``model.
+    pseudo_measurement``, computed right after the prediction to the scan time, the pose
+    the network was trained on), with the model's own noise (``model.sigmas``: RMS
+    residuals on validation data) instead of (sigma_range, sigma_bearing). Then the rest
+    is unchanged: gating and the update use z'; a new landmark is g(prior pose, z') =
+    l_ann, with P_ll = J_pose P_vv J_pose^T + J_z R' J_z^T, the inverse model's Jacobians
+    at z' (the correction's own dependence on the pose is neglected, as the network's input
+    pose is the prior, not a state the update may move). A model with zero correction and
+    R' = R reproduces the plain filter to rounding (tests/test_ann.py).
 """
 from __future__ import annotations
 
@@ -86,7 +102,7 @@ from .vehicle import Vehicle
 
 __all__ = ["SlamConfig", "SlamResult", "ObservationLog", "EkfSlam", "InnovationError",
            "run", "control_table", "pose_nees", "one_blas_thread", "GPS_MODES", "MOTION_MODELS", "ASSOCIATIONS",
-           "DATASET_NAMES", "STATUS"]
+           "DATASET_NAMES", "STATUS", "LANDMARK_MODELS"]
 
 #: GPS use: 'none'; 'init' = GPS updates only for the first ``gps_init_seconds``; 'all'.
 GPS_MODES = ("none", "init", "all")
@@ -97,6 +113,10 @@ ASSOCIATIONS = ("nn", "truth")
 MOTION_MODELS = ("euler", "midpoint")
 #: Datasets with their own defaults in :meth:`SlamConfig.for_dataset`.
 DATASET_NAMES = ("car_park", "victoria_park", "simulated")
+#: Landmark measurement models (``SlamConfig.landmark_model``): 'inverse' = the detections
+#: as measured (inverse observation at initialisation); 'ann' = a trained landmark
+#: network's pseudo-measurements (module docstring, ``annslam_lib.ann``).
+LANDMARK_MODELS = ("inverse", "ann")
 #: Codes of ``ObservationLog.status``.
 STATUS = {"associated": 0, "new": 1, "rejected": 2, "out_of_range": 3}
 _PI, _TWO_PI = math.pi, 2.0 * math.pi
@@ -128,6 +148,10 @@ class SlamConfig:
         cluster width) below min_diameter, m (0 keeps all).
         feature_source: passed to ``features.detections_for`` ('auto': the dataset's own
         detections, else beacons extracted from its raw laser).
+        landmark_model: 'inverse' (the detections as measured) or 'ann' (the trained
+        network passed as ``run(..., landmark_model=model)`` turns every detection into a
+        pseudo-measurement with the model's noise, which replaces sigma_range and
+        sigma_bearing; module docstring).
     Data association
         association: 'nn' (gated nearest neighbour, ``association.associate``) or
         'truth' (simulator's landmark ids: known data association).
@@ -171,6 +195,7 @@ class SlamConfig:
     max_range: float = 30.0
     min_diameter: float = 0.0
     feature_source: str = "auto"
+    landmark_model: str = "inverse"
     association: str = "nn"
     gate_prob: float = 0.99
     new_landmark_prob: float = 0.99999
@@ -212,6 +237,7 @@ class SlamConfig:
         _choice("gps_mode", self.gps_mode, GPS_MODES)
         _choice("motion_model", self.motion_model, MOTION_MODELS)
         _choice("association", self.association, ASSOCIATIONS)
+        _choice("landmark_model", self.landmark_model, LANDMARK_MODELS)
         if not isinstance(self.feature_source, str):
             raise ValueError(f"SlamConfig.feature_source must be a string, got {self.feature_source!r}")
         pose = self.initial_pose
@@ -930,7 +956,7 @@ def _progress(progress, total):
 
 
 def run(dataset, config: SlamConfig | None = None, *, progress=None,
-        backend: str = "efficient") -> SlamResult:
+        backend: str = "efficient", landmark_model=None) -> SlamResult:
     """Run EKF-SLAM over a whole dataset (notebook 05; notebook 06 for Victoria Park).
 
     dataset: a ``records.Dataset`` (loaded or simulated) or 'car_park' / 'victoria_park'.
@@ -945,12 +971,37 @@ def run(dataset, config: SlamConfig | None = None, *, progress=None,
     detections at once, one batch update with the associated ones, then add the new
     landmarks, then the tentative-landmark rule. BLAS runs on one thread meanwhile
     (:func:`one_blas_thread`).
+
+    landmark_model: with ``config.landmark_model = 'ann'``, the trained model
+    (``ann.TrainedModel``, ``ann.InverseModel`` or anything with ``pseudo_measurement(pose,
+    z, intensity, width)`` and ``sigmas``): its pseudo-measurements replace the detections
+    (module docstring). The log keeps the raw detections.
     """
     with one_blas_thread():
-        return _run(dataset, config, progress, backend)
+        return _run(dataset, config, progress, backend, landmark_model)
 
 
-def _run(dataset, config, progress, backend) -> SlamResult:
+def _landmark_model(cfg: SlamConfig, model):
+    """The landmark model to use (None: the detections as measured), checked against the
+    config so that a forgotten switch or a forgotten model fails loudly."""
+    if cfg.landmark_model == "inverse":
+        if model is not None:
+            raise ValueError("a landmark_model was passed but SlamConfig.landmark_model is "
+                             "'inverse'; set landmark_model='ann' to use it")
+        return None
+    if model is None:
+        raise ValueError("SlamConfig.landmark_model = 'ann' needs the trained model: "
+                         "run(dataset, config, landmark_model=model)")
+    if not (callable(getattr(model, "pseudo_measurement", None)) and hasattr(model, "sigmas")):
+        raise ValueError(f"landmark_model must have pseudo_measurement(pose, z, intensity, "
+                         f"width) and sigmas, got {type(model).__name__}")
+    sr, sb = (float(s) for s in model.sigmas)
+    if not (0 < sr < math.inf and 0 < sb < math.inf):
+        raise ValueError(f"landmark_model sigmas must be positive and finite, got ({sr}, {sb})")
+    return model
+
+
+def _run(dataset, config, progress, backend, landmark_model=None) -> SlamResult:
     t_start = time.perf_counter()
     ds = _resolve_dataset(dataset)
     if config is None:
@@ -977,6 +1028,9 @@ def _run(dataset, config, progress, backend) -> SlamResult:
     controls = control_table(odo, ds.vehicle, cfg.sigma_speed, cfg.sigma_steer)
 
     sr, sb = cfg.sigma_range, cfg.sigma_bearing
+    lmodel = _landmark_model(cfg, landmark_model)
+    if lmodel is not None:                     # the model's pseudo-measurement noise R'
+        sr, sb = (float(s) for s in lmodel.sigmas)
     gate = float(chi2.ppf(cfg.gate_prob, 2))
     new_thr = float(chi2.ppf(cfg.new_landmark_prob, 2))
     gps_gate = math.inf if cfg.gps_gate_prob >= 1.0 else float(chi2.ppf(cfg.gps_gate_prob, 2))
@@ -1077,6 +1131,12 @@ def _run(dataset, config, progress, backend) -> SlamResult:
             use = win[a_:b_]
             use_l = use.tolist()
             z = z_det[use]
+            if lmodel is not None:             # z' = h(prior, l_ann) REPLACES z, never both
+                z = np.asarray(lmodel.pseudo_measurement(
+                    pose_prior[idx], z, det.intensity[use], det.diameter[use]), dtype=float)
+                if z.shape != (use.size, 2) or not np.all(np.isfinite(z)) or np.any(z[:, 0] <= 0):
+                    raise ValueError(f"landmark_model returned invalid pseudo-measurements for "
+                                     f"scan {idx}: need finite ({use.size}, 2) with range > 0")
             if truth:
                 where = {u_: j for j, u_ in enumerate(uids)}
                 first = set()
