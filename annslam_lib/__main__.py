@@ -78,12 +78,44 @@ def _add_errata(sub) -> None:
     p.set_defaults(func=_errata)
 
 
+def _reproduce(args: argparse.Namespace) -> int:
+    from .reproduce import reproduce  # imports torch: only when asked
+
+    reproduce(args.out, fast=args.fast, seeds=args.seeds)
+    return 0
+
+
+def _positive_int(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}")
+    return n
+
+
+def _add_reproduce(sub) -> None:
+    p = sub.add_parser("reproduce", help="run the paper's Car Park experiment end to end: "
+                       "Figures 5-8 and the results table",
+                       description="EKF-SLAM beacons only -> training set -> ANN training -> "
+                       "ANN-enhanced EKF-SLAM -> natural-feature EKF-SLAM; writes "
+                       "fig5_map.png .. fig8_regression.png, results.csv and results.md.")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
+    p.add_argument("--fast", action="store_true",
+                   help="a short simulated run instead of the Car Park (seconds; for CI)")
+    p.add_argument("--seeds", type=_positive_int, default=5, metavar="N",
+                   help="training seeds of the ANN (default 5)")
+    p.set_defaults(func=_reproduce)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m annslam_lib",
                                      description="annslam course library: data and tools.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="command")
     _add_data(sub)
     _add_errata(sub)
+    _add_reproduce(sub)
     return parser
 
 

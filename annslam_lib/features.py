@@ -28,6 +28,7 @@ are rarely seen again in the next scan (:func:`next_scan_match`).
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import numbers
 from dataclasses import dataclass
@@ -566,3 +567,70 @@ def extraction_residuals(detections: Detections, poses, valid, beacons, *,
     return ExtractionResiduals(matched=matched, landmark=np.where(matched, j, -1),
                                range=res[:, 0], bearing=res[:, 1],
                                distance=np.where(ok, dist, np.nan))
+
+
+def _positive(name: str, value) -> float:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not 0 < value < math.inf:
+        raise ValueError(f"{name} must be a positive finite number, got {value!r}")
+    return float(value)
+
+
+# --------------------------------------------------------------------------- natural point features
+
+def point_features(laser: Laser, *, max_width: float = 0.4, max_range_jump: float = 0.3,
+                   min_range: float = 1.0, max_range: float = 30.0,
+                   exclude_tape: bool = False) -> Detections:
+    """Point landmarks from the RANGES of raw scans, intensity ignored (chapter 08: natural features on the Car Park).
+
+    A scan is cut into segments wherever neighbouring beams differ by more than
+    ``max_range_jump`` m (or one returns nothing). A segment is a point feature if it is
+    at most ``max_width`` m wide (beams x 0.5 deg x mean range), stands in front of both
+    neighbours (each farther by more than ``max_range_jump`` or no return) and does not
+    touch the edge of the field of view. Its beams are then handed to the beacon
+    extractor (:func:`extract_beacons`, contiguous clusters only), which gives the
+    same range (mean) and bearing (midpoint of the first and last beam) as for a beacon.
+    ``exclude_tape``: drop segments with a bright (tape) beam: only non-beacon returns.
+    Returns Detections with intensity 0 (not used) and diameter = the chord width.
+    """
+    if not isinstance(laser, Laser):
+        raise ValueError(f"laser must be an annslam_lib.records.Laser, got {type(laser).__name__}")
+    w, jump = _positive("max_width", max_width), _positive("max_range_jump", max_range_jump)
+    hi = _positive("max_range", max_range)
+    if isinstance(min_range, bool) or not isinstance(min_range, numbers.Real) \
+            or not 0 <= min_range < hi:
+        raise ValueError(f"min_range must be a number in [0, max_range), got {min_range!r}")
+    if not isinstance(exclude_tape, bool):
+        raise ValueError(f"exclude_tape must be a bool, got {exclude_tape!r}")
+    S, N = laser.ranges.shape
+    ok = laser.valid
+    r = np.where(ok, laser.ranges, 0.0)
+    same = np.zeros((S, N), dtype=bool)              # beam continues the previous one's segment
+    same[:, 1:] = ok[:, 1:] & ok[:, :-1] & (np.abs(np.diff(r, axis=1)) <= jump)
+    start = ~same.ravel()
+    seg = np.cumsum(start) - 1                       # segment id of every beam (row-major)
+    count = np.bincount(seg)
+    mean = np.bincount(seg, weights=r.ravel()) / count
+    first = np.flatnonzero(start)
+    last = np.append(first[1:] - 1, S * N - 1)
+    flat = np.where(ok, laser.ranges, np.inf).ravel()
+    left = np.where(first % N > 0, flat[np.maximum(first - 1, 0)], -np.inf)
+    right = np.where(last % N < N - 1, flat[np.minimum(last + 1, S * N - 1)], -np.inf)
+    width = count * np.mean(np.diff(laser.angles)) * mean
+    keep = (ok.ravel()[first] & (width <= w) & (left > mean + jump) & (right > mean + jump))
+    if exclude_tape:
+        keep &= np.bincount(seg, weights=(laser.intensity.ravel() > 0), minlength=count.size) == 0
+    marked = Laser(t=laser.t, ranges=laser.ranges, intensity=keep[seg].reshape(S, N).astype(np.uint8),
+                   max_range=laser.max_range, angles=laser.angles)
+    det = extract_beacons(marked, BeaconConfig(
+        min_range=float(min_range), max_range=hi, max_gap_beams=0, max_range_jump=jump))
+    return dataclasses.replace(det, intensity=np.zeros(det.count, dtype=np.uint8))
+
+
+def with_detections(dataset: Dataset, detections: Detections, kind: str = "points") -> Dataset:
+    """A copy of ``dataset`` whose point detections are ``detections`` (use with
+    ``SlamConfig(feature_source='detections')``); the raw laser, GPS and true map stay."""
+    if not isinstance(dataset, Dataset) or not isinstance(detections, Detections):
+        raise ValueError("with_detections needs a records.Dataset and a records.Detections")
+    if detections.t.shape != dataset.scan_times.shape or np.any(detections.t != dataset.scan_times):
+        raise ValueError("detections must have one entry per scan of the dataset, same times")
+    return dataclasses.replace(dataset, detections=detections, landmark_kind=kind)
