@@ -1,11 +1,11 @@
 """Command line of the course library.
 
     python -m annslam_lib data fetch  [name ...]   download + verify (default: the course's datasets)
-    python -m annslam_lib errata                   the paper's errata as a Markdown table
-    python -m annslam_lib reproduce --out DIR [--fast] [--seeds N]   the paper's figures 5-8 and results table
     python -m annslam_lib data verify [name ...]   check the sha256 of every file; exit 1 on a problem
     python -m annslam_lib data where  [name ...]   print the data directory (or dataset folders)
     python -m annslam_lib data list   [name ...]   print the datasets and how to cite them
+    python -m annslam_lib errata                   the paper's errata as a Markdown table
+    python -m annslam_lib reproduce --out DIR [--fast] [--seeds N]   the paper's figures 5-8 and results table
 
 Each command is a sub-parser added by an ``_add_<command>`` function that sets ``func``;
 ``main`` returns the exit code.
