@@ -32,3 +32,12 @@ def test_readme_commands_and_notebooks_exist():
     on_disk = sorted(p.name for p in (ROOT / "notebooks").glob("*.ipynb"))
     linked = sorted(set(re.findall(r"\(notebooks/([0-9]{2}_[a-z_0-9]+\.ipynb)\)", README)))
     assert on_disk == linked, f"README notebook map {linked} differs from notebooks/ {on_disk}"
+
+
+def test_notebook_links_point_to_existing_notebooks():
+    import json
+    for nb in sorted((ROOT / "notebooks").glob("*.ipynb")):
+        cells = json.loads(nb.read_text())["cells"]
+        text = "".join("".join(c["source"]) for c in cells if c["cell_type"] == "markdown")
+        for target in re.findall(r"\]\(([0-9]{2}_[A-Za-z0-9_]+\.ipynb)", text):
+            assert (ROOT / "notebooks" / target).exists(), f"{nb.name} links a missing {target}"
