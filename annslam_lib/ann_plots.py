@@ -32,8 +32,9 @@ Course figures of notebook 07 (also returning the Figure):
   (baseline) and the network per experiment; ``rows`` is a list of dicts with 'label',
   'base' (m) and 'ann' (m: one value or one per training seed; mean bar, +-1 std error
   bar over seeds).
-- ``plot_landmark_estimates(base, predicted, target, ax=None, title="") -> Figure``:
-  landmark estimates on the map: inverse model (grey), network (blue) and true beacons.
+- ``plot_landmark_errors(base, predicted, target, ax=None, title="") -> Figure``: errors
+  of single landmark estimates relative to their true beacons, inverse model (grey)
+  against network (blue).
 
 The library computes the numbers (``annslam_lib.ann``); these functions only draw them.
 """
@@ -49,7 +50,7 @@ from .plotting import BEACON_STYLE
 
 __all__ = ["PART_LABELS", "PART_COLORS", "plot_performance", "plot_error_histogram",
            "plot_regression", "plot_activations", "plot_rmse_comparison",
-           "plot_landmark_estimates"]
+           "plot_landmark_errors"]
 
 #: nntool's names of the parts.
 PART_LABELS = {"train": "Training", "val": "Validation", "test": "Test", "all": "All"}
@@ -259,9 +260,9 @@ def plot_rmse_comparison(rows, ax=None):
                 label="inverse model (no network)", gid="base")
     ba = ax.bar(x + w / 2, mean, w, yerr=std, capsize=4, color="tab:blue", edgecolor="k", lw=0.5,
                 label="network (mean +- std over seeds)", gid="ann")
-    for bars, vals in ((bb, base), (ba, mean)):
-        for rect, v in zip(bars, vals):
-            ax.annotate(f"{v:.3f}", (rect.get_x() + rect.get_width() / 2, rect.get_height()),
+    for bars, vals, err in ((bb, base, np.zeros(len(rows))), (ba, mean, std)):
+        for rect, v, e in zip(bars, vals, err):                # label above the error bar
+            ax.annotate(f"{v:.3f}", (rect.get_x() + rect.get_width() / 2, v + e),
                         xytext=(0, 3), textcoords="offset points", ha="center", fontsize=8)
     ax.set_xticks(x, labels, fontsize=8)
     ax.set(ylabel="held-out RMSE (m)", ylim=(0, 1.25 * max(max(base), max(np.add(mean, std)))))
@@ -270,26 +271,31 @@ def plot_rmse_comparison(rows, ax=None):
     return ax.figure
 
 
-def plot_landmark_estimates(base, predicted, target, ax=None, title: str = ""):
-    """Landmark estimates of single observations on the map: the inverse model's
-    (grey), the network's (blue) and the true beacons (``target``, one per row or the
-    unique ones). Memorisation shows as blue points snapped onto the beacons."""
+def plot_landmark_errors(base, predicted, target, ax=None, title: str = ""):
+    """Errors of single landmark estimates, each drawn relative to its own true beacon
+    (the beacon at the origin): the inverse model's ``base - target`` (grey) and the
+    network's ``predicted - target`` (blue), m; RMSEs in the legend. Memorisation shows
+    as the blue cloud collapsing onto the origin."""
     base = np.asarray(base, dtype=float)
     predicted = np.asarray(predicted, dtype=float)
     target = np.asarray(target, dtype=float)
     for name, a in (("base", base), ("predicted", predicted), ("target", target)):
         if a.ndim != 2 or a.shape[1] != 2 or not np.all(np.isfinite(a)):
             raise ValueError(f"{name} must be an (n, 2) array of finite points, got shape {a.shape}")
-    if base.shape != predicted.shape:
-        raise ValueError(f"base and predicted must have the same shape, got {base.shape} "
-                         f"and {predicted.shape}")
-    ax = _axes(ax, figsize=(6, 6))
-    ax.plot(base[:, 0], base[:, 1], ".", color="0.55", ms=4, label="inverse model g(prior, z)",
-            gid="base")
-    ax.plot(predicted[:, 0], predicted[:, 1], ".", color="tab:blue", ms=4, label="network",
-            gid="predicted")
-    beacons = np.unique(target, axis=0)
-    ax.scatter(beacons[:, 0], beacons[:, 1], label="true beacons", gid="beacons", **BEACON_STYLE)
-    ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal", title=title)
-    ax.legend(fontsize=8)
+    if not base.shape == predicted.shape == target.shape:
+        raise ValueError(f"base, predicted and target must have the same shape, got {base.shape}, "
+                         f"{predicted.shape} and {target.shape}")
+    ax = _axes(ax, figsize=(5.5, 5.5))
+    eb, ep = base - target, predicted - target
+    rms = [float(np.sqrt(np.mean(np.sum(e ** 2, axis=1)))) for e in (eb, ep)]
+    ax.plot(eb[:, 0], eb[:, 1], ".", color="0.55", ms=4, gid="base",
+            label=f"inverse model g(prior, z): RMSE {rms[0]:.3f} m")
+    ax.plot(ep[:, 0], ep[:, 1], ".", color="tab:blue", ms=4, alpha=0.7, gid="predicted", zorder=6,
+            label=f"network: RMSE {rms[1]:.3f} m")
+    ax.scatter([0.0], [0.0], label="true beacon", gid="beacon", **BEACON_STYLE)
+    lim = 1.1 * float(np.max(np.abs(np.concatenate([eb, ep])))) if eb.size else 1.0
+    ax.set(xlim=(-lim, lim), ylim=(-lim, lim), aspect="equal", title=title,
+           xlabel="estimate - true beacon, x [m]", ylabel="estimate - true beacon, y [m]")
+    ax.legend(fontsize=8, loc="upper left")
+    ax.grid(alpha=0.3)
     return ax.figure

@@ -243,7 +243,8 @@ def test_rmse_comparison_bars_are_the_means():
     np.testing.assert_allclose(base, [0.2, 0.12])
     np.testing.assert_allclose(net, [0.22, 0.1])
     assert [t.get_text() for t in ax.get_xticklabels()] == ["a", "b"]
-    assert "0.220" in [t.get_text() for t in ax.texts]
+    (label,) = [t for t in ax.texts if t.get_text() == "0.220"]
+    assert label.xy[1] == pytest.approx(0.22 + np.std([0.21, 0.23, 0.22]))   # above the error bar
     with pytest.raises(ValueError, match="empty"):
         ann_plots.plot_rmse_comparison([])
     with pytest.raises(ValueError, match="'label'"):
@@ -252,16 +253,25 @@ def test_rmse_comparison_bars_are_the_means():
         ann_plots.plot_rmse_comparison([dict(label="x", base=0.1, ann=[np.nan])])
 
 
-def test_landmark_estimates_plot(fitted):
+def test_landmark_errors_plot(fitted):
     ts, sp, model = fitted
     i = sp.test
-    ax = ann_plots.plot_landmark_estimates(ts.base[i], model.predict(ts.X[i]), ts.target[i]).axes[0]
-    (base,), (pred,) = _by_gid(ax, "base"), _by_gid(ax, "predicted")
-    np.testing.assert_array_equal(base.get_xydata(), ts.base[i])
-    np.testing.assert_array_equal(pred.get_xydata(), model.predict(ts.X[i]))
-    (beacons,) = [c for c in ax.collections if c.get_gid() == "beacons"]
-    np.testing.assert_array_equal(beacons.get_offsets(), np.unique(ts.target[i], axis=0))
+    pred = model.predict(ts.X[i])
+    ax = ann_plots.plot_landmark_errors(ts.base[i], pred, ts.target[i]).axes[0]
+    (base,), (net,) = _by_gid(ax, "base"), _by_gid(ax, "predicted")
+    np.testing.assert_allclose(base.get_xydata(), ts.base[i] - ts.target[i])
+    np.testing.assert_allclose(net.get_xydata(), pred - ts.target[i])
+    # The legend's RMSEs are split_rmse's (an independent computation of the same numbers).
+    r = ann.split_rmse(model, ts, sp)["test"]
+    assert base.get_label().endswith(f"RMSE {r['rmse_base']:.3f} m")
+    assert net.get_label().endswith(f"RMSE {r['rmse_ann']:.3f} m")
+    (beacon,) = [c for c in ax.collections if c.get_gid() == "beacon"]
+    np.testing.assert_array_equal(beacon.get_offsets(), [[0.0, 0.0]])
+    # Every point is inside the (square, symmetric) axes.
+    lim = ax.get_xlim()[1]
+    assert ax.get_xlim() == (-lim, lim) == ax.get_ylim()
+    assert np.abs(base.get_xydata()).max() < lim and np.abs(net.get_xydata()).max() < lim
     with pytest.raises(ValueError, match="same shape"):
-        ann_plots.plot_landmark_estimates(ts.base[i], ts.base[i][:-1], ts.target[i])
+        ann_plots.plot_landmark_errors(ts.base[i], ts.base[i][:-1], ts.target[i])
     with pytest.raises(ValueError, match="target"):
-        ann_plots.plot_landmark_estimates(ts.base[i], ts.base[i], ts.target[i, 0])
+        ann_plots.plot_landmark_errors(ts.base[i], ts.base[i], ts.target[i, 0])

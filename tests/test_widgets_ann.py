@@ -1,0 +1,124 @@
+"""Headless tests of the chapter 07 explorer (annslam_lib.widgets.ann)."""
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+pytest.importorskip("torch")
+
+from annslam_lib import ann  # noqa: E402
+from annslam_lib.widgets import ann as wann  # noqa: E402
+
+
+def _synthetic_set(n_scans: int = 90, bias: float = 0.3, seed: int = 3) -> ann.TrainingSet:
+    """Two detections per scan of 10 beacons, measured ``bias`` m too far (no filter)."""
+    rng = np.random.default_rng(seed)
+    beacons = rng.uniform(-15, 15, (10, 2))
+    scan = np.repeat(np.arange(n_scans), 2)
+    beacon = np.concatenate([rng.choice(10, 2, replace=False) for _ in range(n_scans)])
+    pose = np.repeat(np.c_[rng.uniform(-4, 4, (n_scans, 2)), rng.uniform(-3, 3, n_scans)], 2, 0)
+    d = beacons[beacon] - pose[:, :2]
+    z = np.c_[np.hypot(d[:, 0], d[:, 1]) + bias + rng.normal(0, 0.05, scan.size),
+              np.arctan2(d[:, 1], d[:, 0]) - pose[:, 2] + np.pi / 2]
+    X, base = ann.encode(pose, z)
+    target = beacons[beacon]
+    return ann.TrainingSet(X=X, Y=target - base, base=base, target=target, beacon=beacon,
+                           t=0.25 * scan, scan=scan, pose=pose, z=z)
+
+
+@pytest.fixture(scope="module")
+def ts():
+    return _synthetic_set()
+
+
+@pytest.fixture(scope="module")
+def grid(ts):
+    cfg = ann.TrainConfig(max_epochs=25)
+    return wann.hidden_size_grid(ts, hidden=(1, 4), seeds=(0, 2), config=cfg), cfg
+
+
+@pytest.fixture(autouse=True)
+def _close():
+    yield
+    plt.close("all")
+
+
+def test_grid_holds_the_numbers_of_independent_training(ts, grid):
+    g, cfg = grid
+    assert g.chrono.shape == g.lbo.shape == (2, 2) and set(g.models) == {(1, 0), (1, 2), (4, 0), (4, 2)}
+    # One cell recomputed from scratch: same seed, same split -> bitwise the same model.
+    c = ann.TrainConfig(max_epochs=25, hidden=(4,), seed=2)
+    sp = ann.chronological_split(ts)
+    m = ann.train(ts, sp, c)
+    err = np.hypot(*(m.predict(ts.X[sp.test]) - ts.target[sp.test]).T)
+    assert g.chrono[1, 1] == pytest.approx(np.sqrt(np.mean(err ** 2)), rel=1e-12)
+    base = np.hypot(*(ts.base[sp.test] - ts.target[sp.test]).T)
+    assert g.chrono_base == pytest.approx(np.sqrt(np.mean(base ** 2)), rel=1e-12)
+    ev = ann.evaluate_leave_beacons_out(ts, c)
+    assert g.lbo[1, 1] == pytest.approx(ev.rmse_ann, rel=1e-12)
+    assert g.lbo_base == pytest.approx(ev.rmse_base, rel=1e-12)
+    # Parameter count = the length of the trained weight vector.
+    for i, h in enumerate(g.hidden):
+        assert g.n_params[i] == g.models[(h, 0)].theta.numel()
+    # The 0.3 m bias is learnable: the bigger network beats the baseline on unseen beacons.
+    assert g.lbo[1].mean() < 0.8 * g.lbo_base
+
+
+def test_grid_without_leave_beacons_out(ts):
+    g = wann.hidden_size_grid(ts, hidden=(2,), seeds=(1,), config=ann.TrainConfig(max_epochs=5),
+                              leave_beacons_out=False)
+    assert np.isnan(g.lbo).all() and np.isnan(g.lbo_base) and np.isfinite(g.chrono).all()
+    fig = wann.plot_hidden_grid(g)
+    gids = [ln.get_gid() for ln in fig.axes[0].lines]
+    assert "mean_chronological test" in gids and "mean_leave-beacons-out" not in gids
+
+
+def test_plot_hidden_grid_shows_means_and_baselines(grid):
+    g, _ = grid
+    fig = wann.plot_hidden_grid(g, hidden=4, seed=2)
+    lines = {ln.get_gid(): ln for ln in fig.axes[0].lines}
+    np.testing.assert_allclose(lines["mean_chronological test"].get_ydata(), g.chrono.mean(axis=1))
+    np.testing.assert_allclose(lines["mean_leave-beacons-out"].get_ydata(), g.lbo.mean(axis=1))
+    np.testing.assert_array_equal(lines["mean_leave-beacons-out"].get_xdata(), g.hidden)
+    assert lines["base_leave-beacons-out"].get_ydata()[0] == g.lbo_base
+    assert lines["current_chronological test"].get_ydata()[0] == g.chrono[1, 1]
+
+
+def test_explorer_follows_the_sliders(grid):
+    g, _ = grid
+    w = wann.hidden_size_explorer(g, hidden=1, seed=0)
+    s = w.holder["summary"]
+    m = g.models[(1, 0)]
+    assert (s["hidden"], s["seed"], s["best_epoch"], s["epochs"]) == (1, 0, m.best_epoch, m.epochs)
+    assert s["chrono_rmse"] == g.chrono[0, 0] and s["lbo_mean"] == pytest.approx(g.lbo[0].mean())
+    w.children[0].value = 4
+    w.children[1].value = 2
+    s = w.holder["summary"]
+    assert (s["hidden"], s["seed"]) == (4, 2)
+    assert s["lbo_rmse"] == g.lbo[1, 1] and s["n_params"] == g.n_params[1]
+    # The left panel is that network's performance plot: its lines are its history.
+    perf = plt.gcf().axes[0]
+    val = [ln for ln in perf.lines if ln.get_gid() == "mse_val"][0]
+    np.testing.assert_array_equal(val.get_ydata(), g.models[(4, 2)].history["val"])
+    assert s["best_val_mse"] == min(val.get_ydata())
+
+
+def test_bad_input(ts, grid):
+    g, _ = grid
+    with pytest.raises(ValueError, match="not in the grid"):
+        wann.grid_summary(g, 3, 0)
+    with pytest.raises(ValueError, match="seed"):
+        wann.hidden_size_explorer(g, hidden=1, seed=7)
+    with pytest.raises(ValueError, match="HiddenSizeGrid"):
+        wann.hidden_size_explorer(object())
+    with pytest.raises(ValueError, match="hidden"):
+        wann.hidden_size_grid(ts, hidden=(0, 2))
+    with pytest.raises(ValueError, match="seeds"):
+        wann.hidden_size_grid(ts, seeds=(1, 1))
+    with pytest.raises(ValueError, match="TrainingSet"):
+        wann.hidden_size_grid(np.zeros((3, 12)))
+    with pytest.raises(ValueError, match="TrainConfig"):
+        wann.hidden_size_grid(ts, config={"hidden": (3,)})
