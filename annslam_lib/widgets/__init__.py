@@ -5,12 +5,16 @@
 - ``offset`` (02): ``offset_explorer``, the laser offset a, b against GPS on a real turn
 - ``observation`` (03): ``measurement_explorer``, a predicted measurement and its covariance
 - ``landmarks`` (04): ``beacon_scrubber`` and ``gate_explorer``
+- ``slam`` (05): ``slam_explorer``, the Car Park filter up to a time, with its noise settings
+- ``victoria`` (06): a time slider over the stored Victoria Park run
+- ``ann`` (07): hidden size and seed over precomputed trainings
 
 Each explorer is built from a pure function (testable without a browser) plus a
 drawing callback; the widget keeps the latest result in ``widget.holder["summary"]``
 so a headless test can move the slider and check what a student would see.
 """
-from . import data, kinematics, landmarks, observation, offset
+from . import ann, data, kinematics, landmarks, observation, offset, slam, victoria
 from .data import scan_scrubber, scan_summary
 
-__all__ = ["data", "kinematics", "landmarks", "observation", "offset", "scan_scrubber", "scan_summary"]
+__all__ = ["ann", "data", "kinematics", "landmarks", "observation", "offset", "slam", "victoria",
+           "scan_scrubber", "scan_summary"]
