@@ -527,7 +527,7 @@ def write_table(st: Study, out) -> tuple[Path, Path]:
     lines += ["", f"Held-out time: t >= {st.t_heldout:.1f} s (last 15 % of the scans); held-out "
               "beacons: leave-beacons-out fold (seed mod 5). ANN and control: mean ± sample sd "
               "over the training seeds. Natural features: point features from the ranges only "
-              "(annslam_lib.reproduce.point_features); their landmarks that match no surveyed "
+              "(annslam_lib.features.point_features); their landmarks that match no surveyed "
               "beacon are real objects that were never surveyed, counted as 'unmatched'.",
               "", "## The paper's claims", "", verdict_markdown(verdict(st))]
     p_md = out / "results.md"
