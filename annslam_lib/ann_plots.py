@@ -168,7 +168,7 @@ def plot_regression(source, ts=None, split=None, *, kind: str = "position", axes
     reg = _regression_data(source, ts, split, kind)
     parts = (*ann.SPLITS, "all")
     if axes is None:
-        fig, axes = plt.subplots(2, 2, figsize=(9, 8.5))
+        fig, axes = plt.subplots(2, 2, figsize=(8, 7.5))
     axes = list(np.ravel(axes))
     if len(axes) != 4:
         raise ValueError(f"axes must be four axes (Training, Validation, Test, All), got {len(axes)}")
@@ -182,14 +182,14 @@ def plot_regression(source, ts=None, split=None, *, kind: str = "position", axes
         lo, hi = float(min(g.min(), o.min())), float(max(g.max(), o.max()))
         pad = 0.05 * (hi - lo) if hi > lo else 0.5
         xs = np.array([lo - pad, hi + pad])
-        ax.plot(g, o, "o", ms=3, mfc="none", mec="k", mew=0.5, alpha=0.6, label="Data",
-                gid="data")
+        ax.plot(g, o, ".", ms=3, color="k", label="Data", gid="data")
         ax.plot(xs, xs, ":", color="0.4", lw=1.2, label="Y = T", gid="identity")
         if np.isfinite(d["slope"]):
             ax.plot(xs, d["slope"] * xs + d["intercept"], color=PART_COLORS[p], lw=1.8,
                     label="Fit", gid="fit")
         ax.set(xlim=xs, ylim=xs, aspect="equal", xlabel="Target (m)",
-               ylabel=f"Output ~= {d['slope']:.3g}*Target + {d['intercept']:.2g}",
+               ylabel=f"Output ~= {d['slope']:.3g}*Target {'-' if d['intercept'] < 0 else '+'} "
+                      f"{abs(d['intercept']):.2g}",
                title=f"{PART_LABELS[p]}: R={d['r']:.5g}")
         ax.legend(loc="upper left", fontsize=8)
     fig = axes[0].figure
@@ -288,9 +288,9 @@ def plot_landmark_errors(base, predicted, target, ax=None, title: str = ""):
     ax = _axes(ax, figsize=(5.5, 5.5))
     eb, ep = base - target, predicted - target
     rms = [float(np.sqrt(np.mean(np.sum(e ** 2, axis=1)))) for e in (eb, ep)]
-    ax.plot(eb[:, 0], eb[:, 1], ".", color="0.55", ms=4, gid="base",
+    ax.plot(eb[:, 0], eb[:, 1], ".", color="0.55", ms=3, gid="base",
             label=f"inverse model g(prior, z): RMSE {rms[0]:.3f} m")
-    ax.plot(ep[:, 0], ep[:, 1], ".", color="tab:blue", ms=4, alpha=0.7, gid="predicted", zorder=6,
+    ax.plot(ep[:, 0], ep[:, 1], ".", color="tab:blue", ms=3, gid="predicted", zorder=6,
             label=f"network: RMSE {rms[1]:.3f} m")
     ax.scatter([0.0], [0.0], label="true beacon", gid="beacon", **BEACON_STYLE)
     lim = 1.1 * float(np.max(np.abs(np.concatenate([eb, ep])))) if eb.size else 1.0
