@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import kinematics
+from .ekf_slam import check_initial
 from .geometry import wrap_angle
 from .observation import inverse_observe, observe
 from .vehicle import Vehicle
@@ -30,15 +31,8 @@ class DenseEkfSlam:
     """Dense reference EKF-SLAM: x (n,), P (n, n). See the module docstring."""
 
     def __init__(self, x0, P0, vehicle: Vehicle, motion_model: str = "euler") -> None:
-        if motion_model not in ("euler", "midpoint"):
-            raise ValueError(f"motion_model must be 'euler' or 'midpoint', got {motion_model!r}")
+        x0, P0 = check_initial(x0, P0, vehicle, motion_model)
         self._mid = motion_model == "midpoint"
-        x0 = np.array(x0, dtype=float)
-        P0 = np.array(P0, dtype=float)
-        if x0.shape != (3,) or P0.shape != (3, 3):
-            raise ValueError(f"x0 must be (3,) and P0 (3, 3), got {x0.shape} and {P0.shape}")
-        if not (np.all(np.isfinite(x0)) and np.all(np.isfinite(P0))):
-            raise ValueError("initial state or covariance contains NaN or infinite values")
         self.vehicle = vehicle
         self.x = x0.copy()
         self.x[2] = float(wrap_angle(self.x[2]))

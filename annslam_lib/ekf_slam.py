@@ -380,6 +380,27 @@ def _wrap(a):
     return a - _TWO_PI * np.floor((a + _PI) / _TWO_PI)
 
 
+def check_initial(x0, P0, vehicle: Vehicle, motion_model: str) -> tuple[np.ndarray, np.ndarray]:
+    """Validate a filter's start (shared by :class:`EkfSlam` and the dense reference):
+    x0 (3,) and P0 (3, 3) finite, P0 symmetric PSD, a Vehicle, a known motion model.
+    Returns float copies of x0 and P0."""
+    if motion_model not in MOTION_MODELS:
+        raise ValueError(f"motion_model must be one of {MOTION_MODELS}, got {motion_model!r}")
+    x0 = np.array(x0, dtype=float)
+    P0 = np.array(P0, dtype=float)
+    if x0.shape != (3,) or P0.shape != (3, 3):
+        raise ValueError(f"x0 must be (3,) and P0 (3, 3), got {x0.shape} and {P0.shape}")
+    if not (np.all(np.isfinite(x0)) and np.all(np.isfinite(P0))):
+        raise ValueError("initial state or covariance contains NaN or infinite values")
+    if np.max(np.abs(P0 - P0.T)) > 1e-12 * max(1.0, np.max(np.abs(P0))):
+        raise ValueError("initial covariance P0 must be symmetric")
+    if np.min(np.linalg.eigvalsh(P0)) < -1e-12:
+        raise ValueError("initial covariance P0 must be positive semi-definite")
+    if not isinstance(vehicle, Vehicle):
+        raise ValueError(f"vehicle must be a Vehicle, got {type(vehicle).__name__}")
+    return x0, P0
+
+
 class EkfSlam:
     """The efficient EKF-SLAM state (x, P) and its operations (module docstring).
 
@@ -393,21 +414,8 @@ class EkfSlam:
     """
 
     def __init__(self, x0, P0, vehicle: Vehicle, motion_model: str = "euler") -> None:
-        if motion_model not in MOTION_MODELS:
-            raise ValueError(f"motion_model must be one of {MOTION_MODELS}, got {motion_model!r}")
+        x0, P0 = check_initial(x0, P0, vehicle, motion_model)
         self._mid = motion_model == "midpoint"
-        x0 = np.array(x0, dtype=float)
-        P0 = np.array(P0, dtype=float)
-        if x0.shape != (3,) or P0.shape != (3, 3):
-            raise ValueError(f"x0 must be (3,) and P0 (3, 3), got {x0.shape} and {P0.shape}")
-        if not (np.all(np.isfinite(x0)) and np.all(np.isfinite(P0))):
-            raise ValueError("initial state or covariance contains NaN or infinite values")
-        if np.max(np.abs(P0 - P0.T)) > 1e-12 * max(1.0, np.max(np.abs(P0))):
-            raise ValueError("initial covariance P0 must be symmetric")
-        if np.min(np.linalg.eigvalsh(P0)) < -1e-12:
-            raise ValueError("initial covariance P0 must be positive semi-definite")
-        if not isinstance(vehicle, Vehicle):
-            raise ValueError(f"vehicle must be a Vehicle, got {type(vehicle).__name__}")
         self.vehicle = vehicle
         self._a, self._b, self._L = vehicle.a, vehicle.b, vehicle.L
         self.x = x0.copy()
