@@ -4,7 +4,11 @@
 #   ./course.sh lab       set up (venv, packages, data) and open JupyterLab on the course
 #   ./course.sh test      set up and run the whole test suite (unit tests + every notebook, strict nbval)
 #   ./course.sh refresh   re-execute every notebook in place (or the ones named after it)
+#   ./course.sh release   write the student versions (no solutions, no hidden tests) into ./student
+#   ./course.sh grade NB  run notebooks and score their autograded exercises
 #   ./course.sh setup     only set up
+#
+# `test` also installs environment-instructor.txt (nbgrader, playwright for the browser test).
 #
 # Environment: PYTHON (interpreter for the venv, default python3, must be >= 3.11),
 # ANNSLAM_VENV (venv folder, default .venv), ANNSLAM_DATA (data folder; default: per-user cache).
@@ -19,22 +23,24 @@ VPY="$VENV/bin/python"
 # stored notebook outputs are compared digit for digit.
 export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 PYTHONHASHSEED=0
 
-setup() {
+setup() {  # setup [extra requirement files...]
     local t0=$SECONDS
     "$PY" -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else 1)' || {
         echo "annslam needs Python >= 3.11; $("$PY" --version 2>&1) found. Set PYTHON=/path/to/python3.11." >&2
         exit 1
     }
     [ -x "$VPY" ] || "$PY" -m venv "$VENV"
-    # Reinstall only when the requirements changed (a stamp of their hash).
-    local want have=""
-    want=$("$VPY" -c 'import hashlib,sys; print(hashlib.sha256(b"".join(open(f,"rb").read() for f in sys.argv[1:])).hexdigest())' environment.txt pyproject.toml)
-    [ -f "$VENV/.annslam-installed" ] && have=$(cat "$VENV/.annslam-installed")
-    if [ "$want" != "$have" ]; then
-        echo "== installing the course environment into $VENV (torch is the CPU build)"
-        "$VPY" -m pip install --disable-pip-version-check -q -r environment.txt
-        echo "$want" > "$VENV/.annslam-installed"
-    fi
+    # Install each requirements file only when it (or pyproject.toml) changed: a stamp of its hash.
+    local req want stamp
+    for req in environment.txt "$@"; do
+        stamp="$VENV/.annslam-installed-${req%.txt}"
+        want=$("$VPY" -c 'import hashlib,sys; print(hashlib.sha256(b"".join(open(f,"rb").read() for f in sys.argv[1:])).hexdigest())' pyproject.toml "$req")
+        if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
+            echo "== installing $req into $VENV (torch is the CPU build)"
+            "$VPY" -m pip install --disable-pip-version-check -q -r "$req"
+            echo "$want" > "$stamp"
+        fi
+    done
     "$VPY" scripts/check_env.py
     "$VPY" -m annslam_lib data fetch
     echo "== set-up done in $((SECONDS - t0)) s"
@@ -51,7 +57,7 @@ case "$cmd" in
         exec "$VENV/bin/jupyter" lab --ServerApp.root_dir=notebooks "${extra[@]}" "$@" "$PWD/notebooks/00_course_map.ipynb"
         ;;
     test)
-        setup
+        setup environment-instructor.txt
         t0=$SECONDS
         "$VENV/bin/ruff" check .
         "$VPY" -m pytest "$@"
@@ -61,8 +67,16 @@ case "$cmd" in
         setup
         "$VPY" scripts/refresh_notebooks.py "$@"
         ;;
+    release)
+        setup
+        "$VPY" -m annslam_lib release "$@"
+        ;;
+    grade)
+        setup
+        "$VPY" -m annslam_lib grade "$@"
+        ;;
     *)
-        echo "usage: ./course.sh [lab|test|refresh|setup]" >&2
+        echo "usage: ./course.sh [lab|test|refresh|release|grade|setup]" >&2
         exit 2
         ;;
 esac

@@ -6,6 +6,9 @@
     python -m annslam_lib data list   [name ...]   print the datasets and how to cite them
     python -m annslam_lib errata                   the paper's errata as a Markdown table
     python -m annslam_lib reproduce --out DIR [--fast] [--seeds N]   the paper's figures 5-8 and results table
+    python -m annslam_lib release [--out student] [NOTEBOOK ...]   student versions (no solutions)
+    python -m annslam_lib grade NOTEBOOK ... [--json FILE]          run and score autograded cells
+    python -m annslam_lib exercises                                the graded exercises per notebook
 
 Each command is a sub-parser added by an ``_add_<command>`` function that sets ``func``;
 ``main`` returns the exit code.
@@ -110,6 +113,107 @@ def _add_reproduce(sub) -> None:
     p.set_defaults(func=_reproduce)
 
 
+def _course_notebooks() -> list:
+    from pathlib import Path
+
+    folder = Path(__file__).resolve().parents[1] / "notebooks"  # the repository (editable install)
+    found = sorted(folder.glob("*.ipynb"))
+    if not found:
+        raise SystemExit(f"no notebooks found in {folder}: name the instructor notebooks to release")
+    return found
+
+
+def _release(args: argparse.Namespace) -> int:
+    from .release import ReleaseError, exercises, release
+
+    try:
+        written = release(args.notebooks or _course_notebooks(), args.out)
+    except ReleaseError as e:
+        print(f"release: {e}", file=sys.stderr)
+        return 1
+    for path in written:
+        n = len(exercises(path, instructor=False))
+        print(f"{path}  ({n} autograded exercise{'s' if n != 1 else ''})")
+    return 0
+
+
+def _add_release(sub) -> None:
+    p = sub.add_parser("release", help="write student versions of the notebooks (solutions "
+                       "replaced by a NotImplementedError stub, hidden tests removed)",
+                       description="The same transformation as nbgrader's generate_assignment "
+                       "on the cell sources; outputs are cleared.")
+    p.add_argument("notebooks", nargs="*", metavar="NOTEBOOK",
+                   help="instructor notebooks (default: every notebook of the course)")
+    p.add_argument("--out", default="student", metavar="DIR",
+                   help="output folder (default ./student; never the notebooks' own folder)")
+    p.set_defaults(func=_release)
+
+
+def _grade(args: argparse.Namespace) -> int:
+    import json
+
+    from .release import ReleaseError, grade
+
+    from pathlib import Path
+
+    grades = []
+    for path in args.notebooks:
+        inst = None
+        if not args.no_hidden:
+            inst = Path(args.instructor or Path(__file__).resolve().parents[1] / "notebooks")
+            inst = inst / Path(path).name
+            if not inst.exists():
+                print(f"grade: no instructor notebook {inst} (use --instructor DIR or "
+                      f"--no-hidden)", file=sys.stderr)
+                return 1
+            print(f"hidden tests and test cells restored from {inst}")
+        try:
+            g = grade(path, instructor=inst, timeout=args.timeout)
+        except ReleaseError as e:
+            print(f"grade: {e}", file=sys.stderr)
+            return 1
+        print(g.report())
+        grades.append(g)
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump([{"notebook": g.notebook, "score": g.score, "max_score": g.max_score,
+                        "exercises": [vars(r) for r in g.results],
+                        "other_errors": g.other_errors} for g in grades], f, indent=1)
+    return 1 if any(g.other_errors for g in grades) else 0
+
+
+def _add_grade(sub) -> None:
+    p = sub.add_parser("grade", help="execute notebooks and score their autograded cells",
+                       description="Restores the instructor's test cells (hidden tests "
+                       "included) by grade id, as nbgrader autograde does, runs each notebook on a "
+                       "fresh kernel (errors allowed) and gives each autograded cell its points "
+                       "if it raised nothing. Exit code 1 if a cell that is not an exercise "
+                       "failed.")
+    p.add_argument("notebooks", nargs="+", metavar="NOTEBOOK")
+    p.add_argument("--json", metavar="FILE", help="also write the scores as JSON")
+    p.add_argument("--instructor", metavar="DIR", help="folder of the instructor notebooks whose "
+                   "test cells (with hidden tests) replace the submission's; default: the "
+                   "course's notebooks/")
+    p.add_argument("--no-hidden", action="store_true",
+                   help="grade the submission's own test cells as they are")
+    p.add_argument("--timeout", type=_positive_int, default=600, metavar="S",
+                   help="per-cell timeout in seconds (default 600)")
+    p.set_defaults(func=_grade)
+
+
+def _exercises(args: argparse.Namespace) -> int:
+    from .release import exercise_table
+
+    print(exercise_table(args.notebooks or _course_notebooks()))
+    return 0
+
+
+def _add_exercises(sub) -> None:
+    p = sub.add_parser("exercises", help="print the autograded exercises per notebook (Markdown)")
+    p.add_argument("notebooks", nargs="*", metavar="NOTEBOOK")
+    p.set_defaults(func=_exercises)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m annslam_lib",
                                      description="annslam course library: data and tools.")
@@ -117,6 +221,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_data(sub)
     _add_errata(sub)
     _add_reproduce(sub)
+    _add_release(sub)
+    _add_grade(sub)
+    _add_exercises(sub)
     return parser
 
 

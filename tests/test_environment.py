@@ -8,14 +8,14 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _pins() -> dict[str, str]:
+def _pins(name: str = "environment.txt") -> dict[str, str]:
     pins = {}
-    for raw in (ROOT / "environment.txt").read_text().splitlines():
+    for raw in (ROOT / name).read_text().splitlines():
         line = raw.split("#", 1)[0].strip()
         if not line or line == "-e .":
             continue
         m = re.fullmatch(r"([A-Za-z0-9_.\-]+)==([0-9][A-Za-z0-9.+\-]*)", line)
-        assert m, f"environment.txt: {raw!r} is not pinned to an exact version"
+        assert m, f"{name}: {raw!r} is not pinned to an exact version"
         pins[m.group(1).lower()] = m.group(2)
     return pins
 
@@ -28,6 +28,17 @@ def test_every_requirement_is_pinned_and_installed_at_that_version():
     for name, version in pins.items():
         installed = metadata.version(name)
         assert installed.split("+")[0] == version, f"{name}: pinned {version}, installed {installed}"
+
+
+def test_instructor_extras_are_pinned_and_if_installed_at_that_version():
+    pins = _pins("environment-instructor.txt")
+    assert set(pins) == {"nbgrader", "playwright"}
+    for name, version in pins.items():
+        try:
+            installed = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            continue  # optional: a lab venv without them is fine (their tests skip and say so)
+        assert installed == version, f"{name}: pinned {version}, installed {installed}"
 
 
 def test_torch_is_the_cpu_build_without_cuda_packages():

@@ -18,6 +18,16 @@ def test_readme_errata_table_is_the_library_table():
     assert block.group(1).count("\n| ") == len(paper.ERRATA)
 
 
+def test_readme_exercise_table_is_the_notebooks_table():
+    from annslam_lib.release import exercise_table
+
+    block = re.search(r"<!-- exercises:begin -->\n(.*?)\n?<!-- exercises:end -->", README, re.S)
+    assert block, "README lost its exercises markers"
+    table = exercise_table(sorted((ROOT / "notebooks").glob("*.ipynb")))
+    assert block.group(1).strip() == table.strip(), (
+        "README exercise table is stale: paste the output of `python -m annslam_lib exercises`")
+
+
 def test_errata_command_prints_the_table():
     out = subprocess.run([sys.executable, "-m", "annslam_lib", "errata"], capture_output=True,
                          text=True, check=True).stdout

@@ -1,0 +1,394 @@
+"""Checks that compare a student's function with the course's reference and say what is wrong.
+
+A check evaluates both functions on the same inputs (seeded random cases plus the edge
+cases a chapter chooses) and either returns a one-line success message or raises
+:class:`GradingError` whose message names the input, the output component or Jacobian entry,
+the expected and the received value, and, where the pattern is recognisable, the likely
+mistake: a sign error, a transposed matrix, swapped outputs, degrees instead of radians, a
+constant bearing offset (the laser's bearing convention), ``arctan`` instead of ``arctan2``,
+an unwrapped angle, a constant factor, or one of the chapter's known mistakes
+(:class:`Mistake`, e.g. the paper's printed equation).
+
+nbgrader marks a test cell failed when it raises; ``GradingError`` is an ``AssertionError``
+so the cell fails like any assertion, but with a message a student can act on.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+__all__ = ["GradingError", "Mistake", "call", "check_function", "check_jacobian", "check_raises",
+           "describe", "fail", "fmt", "NOT_WRITTEN"]
+
+NOT_WRITTEN = "is not written yet"
+
+
+class GradingError(AssertionError):
+    """An exercise check failed; the message says what, where, expected vs got, and why."""
+
+
+@dataclass(frozen=True)
+class Mistake:
+    """A known wrong answer: if the student's output equals ``wrong(*args)`` on every case
+    (within tolerance), the check fails with ``message`` instead of a generic diff."""
+    message: str
+    wrong: Callable[..., Any]
+
+
+def fail(message: str) -> None:
+    """Raise :class:`GradingError` with ``message`` (for chapter-specific checks)."""
+    raise GradingError(message)
+
+
+# ----------------------------------------------------------------------------- formatting
+
+def fmt(x) -> str:
+    """Compact, deterministic text for a number, vector or matrix (4 significant digits)."""
+    if x is None:
+        return "None"
+    a = np.asarray(x)
+    if a.dtype == bool:
+        return str(a.tolist())
+    if not np.issubdtype(a.dtype, np.number):
+        return repr(x)
+    a = a.astype(float)
+    if a.ndim == 0:
+        v = float(a)
+        return "0" if v == 0 else f"{v:.4g}"
+    if a.ndim == 1:
+        return "(" + ", ".join(fmt(v) for v in a) + ")"
+    return "[" + ", ".join(fmt(r) for r in a) + "]"
+
+
+def describe(args: Sequence, names: Sequence[str] | None = None) -> str:
+    """'v_e=2, alpha=0.3' for the inputs of one case."""
+    names = list(names or [f"arg{i}" for i in range(len(args))])
+    return ", ".join(f"{n}={fmt(a)}" for n, a in zip(names, args))
+
+
+def call(fn: Callable, args: Sequence, *, name: str, arg_names: Sequence[str] | None = None):
+    """Call the student's ``fn(*args)`` and turn what it raises into a :class:`GradingError`
+    that names the function and the input (NotImplementedError: not written yet)."""
+    try:
+        return fn(*args)
+    except NotImplementedError:
+        raise GradingError(
+            f"{name} {NOT_WRITTEN}: it raised NotImplementedError. Replace the line "
+            f"`raise NotImplementedError()` in its cell with your code, run that cell, "
+            f"then run this check again.") from None
+    except GradingError:
+        raise
+    except Exception as e:  # the student's bug: report it with the input that caused it
+        raise GradingError(f"{name}({describe(args, arg_names)}) raised "
+                           f"{type(e).__name__}: {e}") from None
+
+
+def _as_numbers(name: str, out, shape: tuple, where: str) -> np.ndarray:
+    if out is None:
+        raise GradingError(f"{name} returned None at {where}: did you forget `return`?")
+    try:
+        a = np.asarray(out, dtype=float)
+    except (TypeError, ValueError):
+        raise GradingError(f"{name} returned {type(out).__name__} {out!r:.80} at {where}; "
+                           f"expected numbers of shape {shape}") from None
+    if a.shape != shape:
+        if a.size == int(np.prod(shape)) and np.squeeze(a).shape == tuple(d for d in shape if d != 1):
+            return a.reshape(shape)
+        raise GradingError(f"{name} returned shape {a.shape} at {where}; expected shape {shape}")
+    return a
+
+
+def _wrap(a):
+    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
+
+
+# ----------------------------------------------------------------------------- checks
+
+@dataclass
+class _Run:
+    got: np.ndarray       # (n, *shape)
+    exp: np.ndarray
+    err: np.ndarray       # got - exp, angle entries wrapped
+    tol: np.ndarray
+    bad: np.ndarray       # (n, *shape) bool
+    where: list[str]
+
+
+def _evaluate(fn, reference, cases, *, name, arg_names, output, angle_mask, atol, rtol,
+              wrap_mask=None) -> _Run:
+    got, exp, where = [], [], []
+    for args in cases:
+        args = tuple(args)
+        w = describe(args, arg_names)
+        e = np.asarray(output(reference(*args)), dtype=float)
+        g = _as_numbers(name, output(call(fn, args, name=name, arg_names=arg_names)), e.shape, w)
+        got.append(g)
+        exp.append(e)
+        where.append(w)
+    got, exp = np.array(got), np.array(exp)
+    with np.errstate(invalid="ignore"):
+        err = got - exp
+        err = np.where(angle_mask, _wrap(err), err)
+        tol = atol + rtol * np.abs(exp)
+        bad = ~(np.abs(err) <= tol)  # NaN counts as bad
+        if wrap_mask is not None and wrap_mask.any():  # must lie in (-pi, pi]
+            bad |= wrap_mask & ~((got > -np.pi - tol) & (got <= np.pi + tol))
+    return _Run(got, exp, err, tol, bad, where)
+
+
+def _label(labels, idx: tuple) -> str:
+    """'bearing' / 'd bearing / d phi, entry [1, 2]' / 'entry [1, 2]'."""
+    if not idx:
+        return "the output"
+    if labels is None:
+        return f"entry {list(idx)}" if len(idx) > 1 else f"component {idx[0]}"
+    if len(idx) == 1:
+        return f"'{labels[idx[0]]}'"
+    rows, cols = labels
+    return f"d {rows[idx[0]]} / d {cols[idx[1]]} (entry [{idx[0]}, {idx[1]}])"
+
+
+def _close(a, b, tol) -> bool:
+    with np.errstate(invalid="ignore"):
+        return bool(np.all(np.abs(a - b) <= tol))
+
+
+def _diagnose(run: _Run, *, name, labels, angle_mask, wrap_mask, mistakes, cases,
+              angle_hint: str, matrix: bool) -> str | None:
+    """A message for a recognisable pattern of failure, or None."""
+    got, exp, tol = run.got, run.exp, run.tol
+    # 1. NaN or inf where the reference is finite
+    nonfinite = ~np.isfinite(got) & np.isfinite(exp)
+    if nonfinite.any():
+        k, *idx = np.argwhere(nonfinite)[0]
+        msg = (f"{name} returned {fmt(got[(k, *idx)])} for {_label(labels, tuple(idx))} at "
+               f"{run.where[k]}; expected {fmt(exp[(k, *idx)])}.")
+        if angle_mask[tuple(idx)]:
+            msg += " np.arctan(dy / dx) fails when dx = 0: use np.arctan2(dy, dx)."
+        else:
+            msg += " Look for a division by zero."
+        return msg
+    # 2. a chapter's known mistakes (e.g. the paper's printed equation)
+    for m in mistakes:
+        try:
+            wrong = np.array([np.asarray(m.wrong(*c), dtype=float) for c in cases])
+        except Exception:  # the wrong form may be undefined on some case: then it is not this
+            continue
+        if wrong.shape == got.shape:
+            d = np.where(angle_mask, _wrap(got - wrong), got - wrong)
+            if _close(d, 0, tol) and not _close(wrong, exp, tol):
+                return m.message
+    # 3. patterns over all cases
+    if _close(got, -exp, tol):
+        return f"every output of {name} has the wrong sign (e.g. at {run.where[0]}: expected " \
+               f"{fmt(exp[0])}, got {fmt(got[0])})."
+    if matrix and got.shape[1] == got.shape[2] and _close(np.swapaxes(got, 1, 2), exp, tol):
+        return f"{name} returns the transpose of the expected matrix: rows are the outputs, " \
+               f"columns the inputs you differentiate by."
+    if not matrix and got.ndim == 2 and got.shape[1] == 2 and _close(got[:, ::-1], exp, tol):
+        comp = " and ".join(labels) if labels else "the two outputs"
+        return f"{name} returns {comp} swapped: return them in that order."
+    # per entry (vector component or Jacobian entry): a specific message for each wrong entry
+    # whose pattern is recognisable; if every wrong entry has one, they are the answer,
+    # otherwise the generic report lists the entries (with these notes).
+    notes = _entry_notes(run, labels=labels, angle_mask=angle_mask, wrap_mask=wrap_mask,
+                         angle_hint=angle_hint)
+    wrong = [tuple(int(i) for i in ix) for ix in np.argwhere(run.bad.any(axis=0))]
+    if wrong and all(ix in notes for ix in wrong):
+        return "\n".join(notes[ix] for ix in wrong)
+    return None
+
+
+def _entry_notes(run: _Run, *, labels, angle_mask, wrap_mask, angle_hint) -> dict:
+    """{entry index: message} for wrong entries with a recognisable pattern over all cases."""
+    n = len(run.got)
+    flat_got = run.got.reshape(n, -1)
+    flat_exp, flat_tol = run.exp.reshape(n, -1), run.tol.reshape(n, -1)
+    flat_angle, flat_wrap = angle_mask.reshape(-1), wrap_mask.reshape(-1)
+    shape = run.got.shape[1:]
+    notes = {}
+    for j in range(flat_got.shape[1]):
+        g, e, t = flat_got[:, j], flat_exp[:, j], flat_tol[:, j]
+        idx = tuple(int(i) for i in np.unravel_index(j, shape)) if shape else ()
+        note = _entry_note(g, e, t, run.where, _label(labels, idx), bool(flat_angle[j]),
+                           bool(flat_wrap[j]), angle_hint)
+        if note:
+            notes[idx] = note
+    return notes
+
+
+def _entry_note(g, e, t, where, lab, angle: bool, wrap: bool, angle_hint: str) -> str | None:
+    if angle:
+        d = _wrap(g - e)
+        if _close(d, 0, t):
+            if wrap and not _close(g, e, t):
+                k = int(np.argmax(np.abs(g - e) > t))
+                return (f"{lab} is right modulo 2π but not wrapped into (-π, π]: at "
+                        f"{where[k]} expected {fmt(e[k])}, got {fmt(g[k])}. Wrap it, e.g. "
+                        f"(a + np.pi) % (2 * np.pi) - np.pi.")
+            return None
+        if _close(g, np.degrees(e), np.degrees(t)):
+            return f"{lab} is in degrees; the course works in radians."
+        off = float(np.median(d))
+        if _close(_wrap(d - off), 0, t) and abs(off) > 1e-6:
+            deg = np.degrees(off)
+            amount = "180°" if abs(abs(deg) - 180) < 1e-3 else f"{deg:+.1f}°"
+            msg = (f"{lab} is off by a constant {amount} at every input (e.g. at {where[0]}: "
+                   f"expected {fmt(e[0])}, got {fmt(g[0])}).")
+            if abs(abs(deg) - 90) < 1e-3 and angle_hint:
+                msg += " " + angle_hint
+            elif abs(abs(deg) - 180) < 1e-3:
+                msg += (" A 180° offset means the direction is reversed: sensor to landmark, "
+                        "not landmark to sensor.")
+            return msg
+        with np.errstate(invalid="ignore"):
+            half = (np.abs(np.abs(d) - np.pi) <= t) | (np.abs(d) <= t)
+        if np.all(half):
+            k = int(np.argmax(np.abs(d) > t))
+            return (f"{lab} is off by 180° at some inputs (e.g. {where[k]}: expected "
+                    f"{fmt(e[k])}, got {fmt(g[k])}) and right at others: np.arctan(dy / dx) "
+                    f"loses the quadrant; use np.arctan2(dy, dx).")
+        return None
+    if _close(g, e, t):
+        return None
+    scale = np.abs(e) > 1e-6
+    if scale.any() and _close(g, -e, t) and np.any(np.abs(e) > t):
+        k = int(np.argmax(scale))
+        return (f"{lab} has the wrong sign at every input (e.g. at {where[k]}: expected "
+                f"{fmt(e[k])}, got {fmt(g[k])}).")
+    if scale.sum() >= 2 and not np.any(~scale & (np.abs(g) > t)):
+        ratio = g[scale] / e[scale]
+        r0 = float(np.median(ratio))
+        if np.all(np.abs(ratio - r0) <= 1e-6 * max(1.0, abs(r0))) and abs(r0 - 1) > 1e-6 \
+                and abs(r0) > 1e-9:
+            k = int(np.argmax(scale))
+            return (f"{lab} is off by a constant factor {r0:.4g} at every input (e.g. at "
+                    f"{where[k]}: expected {fmt(e[k])}, got {fmt(g[k])}).")
+    return None
+
+
+def _report(run: _Run, *, name, labels, notes: dict | None = None) -> str:
+    """The generic message: how many inputs fail, and the first one in detail."""
+    n = len(run.got)
+    bad_case = run.bad.reshape(n, -1).any(axis=1)
+    k = int(np.argmax(bad_case))
+    entries = [tuple(int(i) for i in ix) for ix in np.argwhere(run.bad[k])]
+    lines = [f"{name} disagrees with the reference at {int(bad_case.sum())} of {n} inputs. "
+             f"First: {run.where[k]}"]
+    for idx in entries[:4]:
+        g, e = run.got[(k, *idx)], run.exp[(k, *idx)]
+        note = ""
+        if abs(e) > run.tol[(k, *idx)] and abs(g + e) <= run.tol[(k, *idx)]:
+            note = "  <- sign error"
+        elif g == 0 and e != 0:
+            note = "  <- left at zero"
+        elif e == 0 and g != 0:
+            note = "  <- should be zero"
+        lines.append(f"  {_label(labels, idx)}: expected {fmt(e)}, got {fmt(g)}{note}")
+    if len(entries) > 4:
+        lines.append(f"  ... and {len(entries) - 4} more entries")
+    always = run.bad.all(axis=0)
+    if run.got.ndim > 2 and always.any() and bad_case.sum() > 1:
+        wrong = [_label(labels, tuple(int(i) for i in ix)) for ix in np.argwhere(always)]
+        lines.append(f"  wrong at every failing input: {', '.join(wrong[:4])}")
+    lines += [f"  {note}" for note in (notes or {}).values()]
+    return "\n".join(lines)
+
+
+def _masks(shape: tuple, angles: Sequence, wrap: bool | Sequence) -> tuple[np.ndarray, np.ndarray]:
+    angle = np.zeros(shape, bool)
+    for i in angles:
+        angle[i] = True
+    wrap_mask = angle.copy() if wrap is True else np.zeros(shape, bool)
+    if wrap not in (True, False):
+        for i in wrap:
+            wrap_mask[i] = True
+    return angle, wrap_mask
+
+
+def check_function(fn: Callable, reference: Callable, cases: Sequence[Sequence], *, name: str,
+                   arg_names: Sequence[str] | None = None, labels: Sequence[str] | None = None,
+                   angles: Sequence[int] = (), wrap: bool | Sequence[int] = True,
+                   atol: float = 1e-8, rtol: float = 1e-6, mistakes: Sequence[Mistake] = (),
+                   angle_hint: str = "", output: Callable = lambda out: out,
+                   what: str = "the reference", quiet: bool = False) -> str:
+    """Compare ``fn(*case)`` with ``reference(*case)`` on every case.
+
+    ``labels`` name the output components; ``angles`` are the indices of angle components
+    (compared modulo 2π; with ``wrap`` they must also lie in (-π, π]). ``output`` extracts the
+    compared part of both results (e.g. ``lambda out: out[0]``). ``mistakes`` are known wrong
+    answers with their own messages; ``angle_hint`` explains a ±90° offset (the bearing
+    convention). Returns (and prints, unless ``quiet``) a one-line success message; raises
+    :class:`GradingError` otherwise.
+    """
+    cases = [tuple(c) for c in cases]
+    if not cases:
+        raise ValueError("check_function needs at least one case")
+    shape = np.asarray(output(reference(*cases[0])), dtype=float).shape
+    angle_mask, wrap_mask = _masks(shape, [(i,) if np.ndim(i) == 0 else tuple(i) for i in angles],
+                                   wrap if isinstance(wrap, bool) else [(i,) for i in wrap])
+    run = _evaluate(fn, reference, cases, name=name, arg_names=arg_names, output=output,
+                    angle_mask=angle_mask, atol=atol, rtol=rtol, wrap_mask=wrap_mask)
+    if run.bad.any():
+        msg = _diagnose(run, name=name, labels=labels, angle_mask=angle_mask,
+                        wrap_mask=wrap_mask, mistakes=mistakes, cases=cases,
+                        angle_hint=angle_hint, matrix=False)
+        raise GradingError(msg or _report(run, name=name, labels=labels, notes=_entry_notes(
+            run, labels=labels, angle_mask=angle_mask, wrap_mask=wrap_mask, angle_hint=angle_hint)))
+    ok = f"✓ {name} agrees with {what} on {len(cases)} inputs."
+    if not quiet:
+        print(ok)
+    return ok
+
+
+def check_jacobian(fn: Callable, reference: Callable, cases: Sequence[Sequence], *, name: str,
+                   rows: Sequence[str], cols: Sequence[str],
+                   arg_names: Sequence[str] | None = None, atol: float = 1e-7,
+                   rtol: float = 1e-6, mistakes: Sequence[Mistake] = (),
+                   output: Callable = lambda out: out, what: str = "the reference Jacobian",
+                   quiet: bool = False) -> str:
+    """Compare a Jacobian ``fn(*case)`` (len(rows) x len(cols)) with ``reference(*case)``.
+
+    A failure names the entry as 'd bearing / d phi (entry [1, 2])', the input, expected vs
+    got, and flags sign errors, entries left at zero, a transposed matrix and entries wrong at
+    every failing input. Returns (and prints) a success message or raises GradingError.
+    """
+    cases = [tuple(c) for c in cases]
+    shape = (len(rows), len(cols))
+    ref_shape = np.asarray(output(reference(*cases[0])), dtype=float).shape
+    if ref_shape != shape:
+        raise ValueError(f"reference Jacobian has shape {ref_shape}, labels say {shape}")
+    no_angles = np.zeros(shape, bool)
+    run = _evaluate(fn, reference, cases, name=name, arg_names=arg_names, output=output,
+                    angle_mask=no_angles, atol=atol, rtol=rtol)
+    labels = (list(rows), list(cols))
+    if run.bad.any():
+        msg = _diagnose(run, name=name, labels=labels, angle_mask=no_angles, wrap_mask=no_angles,
+                        mistakes=mistakes, cases=cases, angle_hint="", matrix=True)
+        raise GradingError(msg or _report(run, name=name, labels=labels, notes=_entry_notes(
+            run, labels=labels, angle_mask=no_angles, wrap_mask=no_angles, angle_hint="")))
+    ok = f"✓ {name} agrees with {what} on {len(cases)} inputs."
+    if not quiet:
+        print(ok)
+    return ok
+
+
+def check_raises(fn: Callable, args: Sequence, *, name: str, why: str,
+                 exception: type[BaseException] = ValueError,
+                 arg_names: Sequence[str] | None = None) -> None:
+    """``fn(*args)`` must raise ``exception`` (bad input gets a clear error, never a
+    silent wrong answer); ``why`` says what is wrong with the input."""
+    try:
+        out = fn(*args)
+    except NotImplementedError:
+        call(fn, args, name=name)  # re-raises the 'not written yet' message
+    except exception:
+        return
+    except Exception as e:
+        raise GradingError(f"{name}({describe(args, arg_names)}) raised {type(e).__name__}: {e}; "
+                           f"expected {exception.__name__} because {why}") from None
+    else:
+        raise GradingError(f"{name}({describe(args, arg_names)}) returned {fmt(out)}; it should "
+                           f"raise {exception.__name__} because {why}")

@@ -1,0 +1,327 @@
+"""Student versions of the course notebooks, and a light autograder, in nbgrader's format.
+
+The instructor notebooks in ``notebooks/`` hold the solutions. An exercise is two cells with
+nbgrader metadata (schema 3): a *solution* cell whose answer sits between ``### BEGIN
+SOLUTION`` and ``### END SOLUTION``, and an autograded *test* cell (``grade: true``, points)
+that calls a check from :mod:`annslam_lib.grading` and may hold ``### BEGIN HIDDEN TESTS`` /
+``### END HIDDEN TESTS``.
+
+:func:`student_version` does what nbgrader's ``generate_assignment`` does to the cell
+sources (same delimiters, matched anywhere in a line; same stub; hidden tests removed;
+outputs cleared), so a course can use either tool; a test compares the two when nbgrader is
+installed. :func:`grade` executes a notebook and scores its test cells by their points.
+
+    python -m annslam_lib release [--out student] [NOTEBOOK ...]
+    python -m annslam_lib grade NOTEBOOK [NOTEBOOK ...]
+"""
+from __future__ import annotations
+
+import copy
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import nbformat
+
+__all__ = ["ReleaseError", "Exercise", "exercises", "validate", "student_version", "release",
+           "GradeResult", "NotebookGrade", "grade", "restore_tests", "exercise_table", "solution_lines", "hidden_test_lines",
+           "CODE_STUB", "TEXT_STUB"]
+
+CODE_STUB = "# YOUR CODE HERE\nraise NotImplementedError()"  # nbgrader's Python stub
+TEXT_STUB = "YOUR ANSWER HERE"
+BEGIN_SOLUTION, END_SOLUTION = "BEGIN SOLUTION", "END SOLUTION"
+BEGIN_HIDDEN, END_HIDDEN = "BEGIN HIDDEN TESTS", "END HIDDEN TESTS"
+_GRADE_ID = re.compile(r"^[a-zA-Z0-9_\-]+$")  # what nbgrader accepts
+
+
+class ReleaseError(ValueError):
+    """A notebook's exercise markup is broken (names the notebook and the cell)."""
+
+
+def _meta(cell) -> dict:
+    return cell.get("metadata", {}).get("nbgrader", {})
+
+
+def _is_solution(cell) -> bool:
+    return bool(_meta(cell).get("solution"))
+
+
+def _is_grade(cell) -> bool:
+    return bool(_meta(cell).get("grade"))
+
+
+@dataclass(frozen=True)
+class Exercise:
+    """One autograded test cell: its grade id, points and cell index."""
+    notebook: str
+    grade_id: str
+    points: float
+    cell: int
+
+
+def _regions(source: str, begin: str, end: str, where: str) -> list[tuple[int, int]]:
+    """(first, last) line indices of each begin..end region (markers included)."""
+    out, start = [], None
+    for i, line in enumerate(source.split("\n")):
+        if begin in line:
+            if start is not None:
+                raise ReleaseError(f"{where}: nested '{begin}' (line {i + 1})")
+            start = i
+        elif end in line:
+            if start is None:
+                raise ReleaseError(f"{where}: '{end}' without '{begin}' (line {i + 1})")
+            out.append((start, i))
+            start = None
+    if start is not None:
+        raise ReleaseError(f"{where}: '{begin}' (line {start + 1}) has no '{end}'")
+    return out
+
+
+def validate(nb, name: str = "notebook", *, instructor: bool = True) -> list[Exercise]:
+    """Check the nbgrader markup of one notebook and return its autograded exercises.
+
+    Raises :class:`ReleaseError` for: duplicate or invalid grade ids, a test cell without
+    positive points or that is not code, unbalanced or nested markers, solution regions
+    outside solution cells, hidden tests outside test cells, a solution cell without a
+    region (nbgrader would replace the whole cell; only checked for ``instructor`` copies:
+    in a student version the regions are stubs).
+    """
+    seen: dict[str, int] = {}
+    found = []
+    for i, cell in enumerate(nb.cells):
+        where = f"{name}, cell {i}"
+        sol = _regions(cell.source, BEGIN_SOLUTION, END_SOLUTION, where)
+        hid = _regions(cell.source, BEGIN_HIDDEN, END_HIDDEN, where)
+        meta = _meta(cell)
+        if sol and not _is_solution(cell):
+            raise ReleaseError(f"{where}: a solution region in a cell not marked as a solution")
+        if hid and not _is_grade(cell):
+            raise ReleaseError(f"{where}: hidden tests in a cell not marked as autograded")
+        if not meta:
+            continue
+        gid = meta.get("grade_id")
+        if not gid or not _GRADE_ID.match(str(gid)):
+            raise ReleaseError(f"{where}: grade id {gid!r} must be letters, digits, '-' or '_'")
+        if gid in seen:
+            raise ReleaseError(f"{where}: grade id {gid!r} already used in cell {seen[gid]}")
+        seen[gid] = i
+        if instructor and _is_solution(cell) and cell.cell_type == "code" and not sol:
+            raise ReleaseError(f"{where}: solution cell {gid!r} has no ### BEGIN/END SOLUTION")
+        if _is_grade(cell):
+            pts = meta.get("points")
+            if not isinstance(pts, (int, float)) or pts <= 0:
+                raise ReleaseError(f"{where}: autograded cell {gid!r} needs points > 0, got {pts!r}")
+            if cell.cell_type != "code" and not _is_solution(cell):
+                raise ReleaseError(f"{where}: autograded test cell {gid!r} must be a code cell")
+            if not _is_solution(cell):
+                found.append(Exercise(name, str(gid), float(pts), i))
+    return found
+
+
+def exercises(path, *, instructor: bool = True) -> list[Exercise]:
+    """The autograded test cells of the notebook at ``path`` (markup validated)."""
+    path = Path(path)
+    return validate(nbformat.read(path, as_version=4), path.name, instructor=instructor)
+
+
+def exercise_table(paths) -> str:
+    """Markdown table of the autograded exercises per notebook (README; ``python -m
+    annslam_lib exercises``): notebook, number of exercises, their grade ids, points."""
+    rows = ["| notebook | exercises | grade ids | points |", "|---|---|---|---|"]
+    for path in sorted(Path(p) for p in paths):
+        found = exercises(path)
+        if not found:
+            continue
+        ids = ", ".join(f"`{e.grade_id.removesuffix('-tests')}`" for e in found)
+        rows.append(f"| `{path.stem}` | {len(found)} | {ids} | {sum(e.points for e in found):g} |")
+    return "\n".join(rows)
+
+
+def _replace(source: str, regions, stub: str | None) -> str:
+    lines = source.split("\n")
+    out, k = [], 0
+    for first, last in regions:
+        out += lines[k:first]
+        if stub is not None:
+            indent = re.match(r"\s*", lines[first]).group(0)
+            out += [indent + s for s in stub.split("\n")]
+        k = last + 1
+    return "\n".join(out + lines[k:])
+
+
+def student_version(nb, name: str = "notebook"):
+    """A copy of instructor notebook ``nb`` for students: every solution region replaced by
+    nbgrader's stub (code: ``# YOUR CODE HERE`` / ``raise NotImplementedError()``, indented
+    like the marker; text: ``YOUR ANSWER HERE``), hidden tests removed, outputs and
+    execution counts cleared, nbgrader metadata kept."""
+    validate(nb, name)
+    nb = copy.deepcopy(nb)
+    for i, cell in enumerate(nb.cells):
+        where = f"{name}, cell {i}"
+        stub = CODE_STUB if cell.cell_type == "code" else TEXT_STUB
+        cell.source = _replace(cell.source, _regions(cell.source, BEGIN_SOLUTION, END_SOLUTION,
+                                                     where), stub)
+        cell.source = _replace(cell.source, _regions(cell.source, BEGIN_HIDDEN, END_HIDDEN,
+                                                     where), None)
+        if cell.cell_type == "code":
+            cell.outputs, cell.execution_count = [], None
+            cell.metadata.pop("execution", None)
+    nb.metadata.pop("widgets", None)  # saved widget state belongs to the executed copy
+    return nb
+
+
+def _region_lines(nb, begin: str, end: str) -> set[str]:
+    lines = set()
+    for cell in nb.cells:
+        src = cell.source.split("\n")
+        for first, last in _regions(cell.source, begin, end, "notebook"):
+            lines |= {s.strip() for s in src[first + 1:last]}
+    return {s for s in lines if s and not s.startswith("#")}
+
+
+def _outside_lines(nb, begin: str, end: str) -> set[str]:
+    lines = set()
+    for cell in nb.cells:
+        src = cell.source.split("\n")
+        inside = set()
+        for first, last in _regions(cell.source, begin, end, "notebook"):
+            inside |= set(range(first, last + 1))
+        lines |= {s.strip() for i, s in enumerate(src) if i not in inside}
+    return lines
+
+
+def solution_lines(nb) -> set[str]:
+    """Code lines that occur ONLY inside solution regions of ``nb`` (stripped, no comments):
+    none of them may appear anywhere in the student version."""
+    return _region_lines(nb, BEGIN_SOLUTION, END_SOLUTION) - _outside_lines(nb, BEGIN_SOLUTION,
+                                                                            END_SOLUTION)
+
+
+def hidden_test_lines(nb) -> set[str]:
+    """Lines that occur only inside hidden-test regions of ``nb``."""
+    return _region_lines(nb, BEGIN_HIDDEN, END_HIDDEN) - _outside_lines(nb, BEGIN_HIDDEN,
+                                                                      END_HIDDEN)
+
+
+def release(paths, out) -> list[Path]:
+    """Write the student version of each instructor notebook in ``paths`` into folder ``out``
+    (created) and return the written paths. All notebooks are validated first (grade ids
+    unique across them); ``out`` must not be a folder of a source notebook."""
+    paths = [Path(p).resolve() for p in paths]
+    out = Path(out).resolve()
+    if not paths:
+        raise ReleaseError("no notebooks to release")
+    if any(p.parent == out for p in paths):
+        raise ReleaseError(f"output folder {out} holds the instructor notebooks: choose another")
+    books, owner = [], {}
+    for p in paths:
+        nb = nbformat.read(p, as_version=4)
+        for ex in validate(nb, p.name):
+            if ex.grade_id in owner:
+                raise ReleaseError(f"grade id {ex.grade_id!r} is in both {owner[ex.grade_id]} "
+                                   f"and {p.name}")
+            owner[ex.grade_id] = p.name
+        books.append((p, nb))
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    for p, nb in books:
+        dest = out / p.name
+        nbformat.write(student_version(nb, p.name), dest)
+        written.append(dest)
+    return written
+
+
+# ------------------------------------------------------------------------------ grading
+
+@dataclass
+class GradeResult:
+    """One autograded cell after execution."""
+    grade_id: str
+    points: float
+    max_points: float
+    cell: int
+    error: str = ""  # 'GradingError: my_x is not written yet: ...' or '' if it passed
+
+    @property
+    def passed(self) -> bool:
+        return not self.error
+
+
+@dataclass
+class NotebookGrade:
+    """A graded notebook: its exercises, and errors in cells that are not exercises."""
+    notebook: str
+    results: list[GradeResult]
+    other_errors: list[tuple[int, str]] = field(default_factory=list)
+
+    @property
+    def score(self) -> float:
+        return sum(r.points for r in self.results)
+
+    @property
+    def max_score(self) -> float:
+        return sum(r.max_points for r in self.results)
+
+    def report(self) -> str:
+        lines = [f"{self.notebook}: {self.score:g} / {self.max_score:g} points"]
+        for r in self.results:
+            mark = "ok  " if r.passed else "FAIL"
+            lines.append(f"  {mark} {r.grade_id} ({r.points:g}/{r.max_points:g})")
+            if r.error:
+                lines += ["       " + s for s in r.error.splitlines()[:6]]
+        for i, err in self.other_errors:
+            lines.append(f"  error in cell {i} (not an exercise): {err.splitlines()[0]}")
+        return "\n".join(lines)
+
+
+def _error_of(cell) -> str:
+    for out in cell.get("outputs", []):
+        if out.get("output_type") == "error":
+            return f"{out.get('ename', 'Error')}: {out.get('evalue', '')}"
+    return ""
+
+
+def restore_tests(nb, instructor) -> int:
+    """Put the instructor's autograded cells (hidden tests included) back into a submission,
+    matched by grade id, as nbgrader's autograde does: a student cannot edit a test into
+    passing, and hidden tests run. Returns the number of cells restored; raises
+    :class:`ReleaseError` if a test cell of the instructor copy is missing."""
+    by_id = {_meta(c)["grade_id"]: c for c in nb.cells if _is_grade(c) and not _is_solution(c)}
+    n = 0
+    for cell in instructor.cells:
+        if _is_grade(cell) and not _is_solution(cell):
+            gid = _meta(cell)["grade_id"]
+            if gid not in by_id:
+                raise ReleaseError(f"the submission has no autograded cell {gid!r} (deleted?)")
+            by_id[gid].source = cell.source
+            n += 1
+    return n
+
+
+def grade(path, *, instructor=None, timeout: int = 600,
+          kernel_name: str = "python3") -> NotebookGrade:
+    """Execute the notebook at ``path`` on a fresh kernel (its folder as working directory,
+    errors allowed so every cell runs) and score each autograded cell: full points if it
+    raised nothing, else 0 with the error message. With ``instructor`` (the instructor
+    notebook's path), its test cells, hidden tests included, replace the submission's first
+    (:func:`restore_tests`). Errors in other cells are listed separately: in a student
+    version they mean the notebook depends on a student's answer outside the exercises."""
+    from nbclient import NotebookClient
+
+    path = Path(path).resolve()
+    nb = nbformat.read(path, as_version=4)
+    found = validate(nb, path.name, instructor=False)
+    if instructor is not None:
+        restore_tests(nb, nbformat.read(Path(instructor), as_version=4))
+    NotebookClient(nb, timeout=timeout, kernel_name=kernel_name, allow_errors=True,
+                   record_timing=False,
+                   resources={"metadata": {"path": str(path.parent)}}).execute()
+    graded = {ex.cell for ex in found}
+    results = []
+    for ex in found:
+        err = _error_of(nb.cells[ex.cell])
+        results.append(GradeResult(ex.grade_id, 0.0 if err else ex.points, ex.points, ex.cell,
+                                   err))
+    others = [(i, _error_of(c)) for i, c in enumerate(nb.cells)
+              if c.cell_type == "code" and i not in graded and _error_of(c)]
+    return NotebookGrade(path.name, results, others)

@@ -1,0 +1,214 @@
+"""Student release: nbgrader markup, stubs, hidden tests, and agreement with nbgrader itself."""
+import importlib.util
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import nbformat
+import pytest
+from nbformat.v4 import new_code_cell, new_markdown_cell, new_notebook
+
+from annslam_lib import release
+from annslam_lib.release import ReleaseError
+
+ROOT = Path(__file__).resolve().parents[1]
+COURSE = sorted((ROOT / "notebooks").glob("*.ipynb"))
+MIN_EXERCISES = 2
+
+
+def _sol(src, gid="ex-a"):
+    c = new_code_cell(src)
+    c.metadata["nbgrader"] = {"grade": False, "grade_id": gid, "locked": False,
+                              "schema_version": 3, "solution": True, "task": False}
+    return c
+
+
+def _test(src, gid="ex-a-tests", points=2):
+    c = new_code_cell(src)
+    c.metadata["nbgrader"] = {"grade": True, "grade_id": gid, "locked": True, "points": points,
+                              "schema_version": 3, "solution": False, "task": False}
+    return c
+
+
+def _toy():
+    return new_notebook(cells=[
+        new_markdown_cell("### Exercise: double it"),
+        new_code_cell("import math"),
+        _sol("def my_double(x):\n    \"\"\"2 x\"\"\"\n    ### BEGIN SOLUTION\n    y = 2 * x\n"
+             "    return y\n    ### END SOLUTION"),
+        _test("# Autograded\nassert my_double(2) == 4, 'my_double(2) should be 4'\n"
+              "### BEGIN HIDDEN TESTS\nassert my_double(-3) == -6\n### END HIDDEN TESTS"),
+        _sol("def my_half(x):\n    ### BEGIN SOLUTION\n    return x / 3\n    ### END SOLUTION",
+             "ex-b"),
+        _test("assert my_half(4) == 2, 'my_half(4) should be 2'", "ex-b-tests", 1),
+        new_code_cell("print(math.pi > 3)"),
+    ], metadata={"kernelspec": {"name": "python3", "display_name": "Python 3",
+                                "language": "python"}})
+
+
+def test_student_version_stubs_solutions_like_nbgrader_and_drops_hidden_tests():
+    nb = _toy()
+    nb.cells[2].outputs = [nbformat.v4.new_output("stream", text="x")]
+    nb.cells[2].execution_count = 3
+    st = release.student_version(nb, "toy")
+    assert st.cells[2].source == ('def my_double(x):\n    """2 x"""\n    # YOUR CODE HERE\n'
+                                  '    raise NotImplementedError()')
+    assert st.cells[3].source == "# Autograded\nassert my_double(2) == 4, 'my_double(2) should be 4'"
+    assert st.cells[2].outputs == [] and st.cells[2].execution_count is None
+    assert st.cells[2].metadata["nbgrader"] == nb.cells[2].metadata["nbgrader"]
+    assert nb.cells[2].source.count("BEGIN SOLUTION") == 1  # the instructor copy is untouched
+    assert release.solution_lines(nb) == {"y = 2 * x", "return y", "return x / 3"}
+    assert release.hidden_test_lines(nb) == {"assert my_double(-3) == -6"}
+    assert [(e.grade_id, e.points, e.cell) for e in release.validate(nb, "toy")] == [
+        ("ex-a-tests", 2.0, 3), ("ex-b-tests", 1.0, 5)]
+
+
+@pytest.mark.parametrize("mutate, message", [
+    (lambda nb: nb.cells[5].metadata["nbgrader"].update(grade_id="ex-a-tests"), "already used"),
+    (lambda nb: nb.cells[5].metadata["nbgrader"].update(points=0), "needs points > 0"),
+    (lambda nb: nb.cells[5].metadata["nbgrader"].update(grade_id="ex b"), "must be letters"),
+    (lambda nb: setattr(nb.cells[2], "source", nb.cells[2].source.replace("### END SOLUTION", "")),
+     "has no 'END SOLUTION'"),
+    (lambda nb: setattr(nb.cells[1], "source", "### BEGIN SOLUTION\nx = 1\n### END SOLUTION"),
+     "not marked as a solution"),
+    (lambda nb: setattr(nb.cells[6], "source", "### BEGIN HIDDEN TESTS\n### END HIDDEN TESTS"),
+     "not marked as autograded"),
+    (lambda nb: setattr(nb.cells[4], "source", "def my_half(x):\n    return x / 2"),
+     "has no ### BEGIN/END SOLUTION"),
+])
+def test_broken_markup_is_named(mutate, message):
+    nb = _toy()
+    mutate(nb)
+    with pytest.raises(ReleaseError, match=message):
+        release.student_version(nb, "toy")
+
+
+def test_release_never_writes_over_the_instructor_notebooks(tmp_path):
+    src = tmp_path / "toy.ipynb"
+    nbformat.write(_toy(), src)
+    with pytest.raises(ReleaseError, match="holds the instructor notebooks"):
+        release.release([src], tmp_path)
+    out = release.release([src], tmp_path / "student")
+    assert out == [tmp_path / "student" / "toy.ipynb"]
+    assert "raise NotImplementedError()" in nbformat.read(out[0], as_version=4).cells[2].source
+
+
+def test_grade_scores_each_autograded_cell(tmp_path):
+    """The toy's second solution is wrong (x / 3): 2 of 3 points, with its assertion message;
+    the student version scores 0 with NotImplementedError in exactly the two test cells."""
+    src = tmp_path / "toy.ipynb"
+    nbformat.write(_toy(), src)
+    g = release.grade(src)
+    assert (g.score, g.max_score) == (2.0, 3.0)
+    assert [r.passed for r in g.results] == [True, False]
+    assert g.results[1].error == "AssertionError: my_half(4) should be 2"
+    assert g.other_errors == []
+    assert "ex-b-tests (0/1)" in g.report()
+    st = release.release([src], tmp_path / "student")[0]
+    gs = release.grade(st)
+    assert gs.score == 0 and [r.error for r in gs.results] == ["NotImplementedError: "] * 2
+    assert gs.other_errors == []
+
+
+# ------------------------------------------------------------------ the course's notebooks
+
+def test_every_chapter_from_01_has_graded_exercises_with_unique_ids():
+    ids, counts = [], {}
+    for path in COURSE:
+        found = release.exercises(path)
+        counts[path.name] = len(found)
+        ids += [e.grade_id for e in found]
+        nb = nbformat.read(path, as_version=4)
+        ids += [c.metadata["nbgrader"]["grade_id"] for c in nb.cells
+                if c.metadata.get("nbgrader", {}).get("solution")]
+    short = {n: c for n, c in counts.items() if n[:2] != "00" and c < MIN_EXERCISES}
+    assert not short, f"chapters with fewer than {MIN_EXERCISES} autograded exercises: {short}"
+    assert len(ids) == len(set(ids)), "grade ids must be unique across the course"
+
+
+@pytest.fixture(scope="module")
+def student(tmp_path_factory):
+    out = tmp_path_factory.mktemp("student")
+    return {p.name: p for p in release.release(COURSE, out)}
+
+
+@pytest.mark.parametrize("path", COURSE, ids=lambda p: p.stem)
+def test_student_version_holds_no_solution_code_no_hidden_tests_no_outputs(path, student):
+    inst = nbformat.read(path, as_version=4)
+    st = nbformat.read(student[path.name], as_version=4)
+    assert len(st.cells) == len(inst.cells)
+    text = "\n".join(c.source for c in st.cells)
+    for marker in ("BEGIN SOLUTION", "END SOLUTION", "BEGIN HIDDEN TESTS", "END HIDDEN TESTS"):
+        assert marker not in text
+    lines = {s.strip() for s in text.split("\n")}
+    leaked = (release.solution_lines(inst) | release.hidden_test_lines(inst)) & lines
+    assert not leaked, f"solution or hidden-test code in the student {path.name}: {leaked}"
+    assert all(not c.get("outputs") for c in st.cells if c.cell_type == "code")
+    n_stubs = text.count("raise NotImplementedError()")
+    n_solutions = sum(1 for c in inst.cells for line in c.source.split("\n")
+                      if "BEGIN SOLUTION" in line and c.cell_type == "code")
+    assert n_stubs >= n_solutions
+
+
+def test_cli_release_writes_every_notebook(tmp_path, capsys):
+    from annslam_lib.__main__ import main
+
+    assert main(["release", "--out", str(tmp_path / "s")]) == 0
+    assert sorted(p.name for p in (tmp_path / "s").glob("*.ipynb")) == [p.name for p in COURSE]
+    assert "autograded exercise" in capsys.readouterr().out
+
+
+# ------------------------------------------------------------------ nbgrader's own tool
+
+def _nbgrader_or_skip():
+    if importlib.util.find_spec("nbgrader") is None:
+        pytest.skip("nbgrader is not installed, so its generate_assignment cannot be compared: "
+                    "pip install -r environment-instructor.txt (./course.sh test does)")
+
+
+def test_nbgrader_generate_assignment_gives_the_same_student_cells(tmp_path, student):
+    """nbgrader 0.9.6's generate_assignment on the instructor notebooks yields cell sources
+    identical to ours, cell for cell."""
+    _nbgrader_or_skip()
+    src = tmp_path / "course" / "source" / "annslam"
+    src.mkdir(parents=True)
+    for p in COURSE:
+        (src / p.name).write_bytes(p.read_bytes())
+    # nbgrader runs its helper executables (alembic) from PATH: put this venv's bin first
+    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}"}
+    proc = subprocess.run([sys.executable, "-m", "nbgrader", "generate_assignment", "annslam",
+                           "--force", "--no-db", f"--CourseDirectory.root={tmp_path / 'course'}"],
+                          capture_output=True, text=True, timeout=300, env=env)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    for p in COURSE:
+        theirs = json.loads((tmp_path / "course" / "release" / "annslam" / p.name).read_text())
+        ours = nbformat.read(student[p.name], as_version=4)
+        assert len(theirs["cells"]) == len(ours.cells)
+        for i, (a, b) in enumerate(zip(theirs["cells"], ours.cells)):
+            src_a = "".join(a["source"]) if isinstance(a["source"], list) else a["source"]
+            assert src_a == b.source, f"{p.name} cell {i} differs from nbgrader's"
+
+
+def test_grading_restores_the_instructor_tests_and_runs_the_hidden_ones(tmp_path):
+    """A student who edits a test cell into passing gets no points for it, and the hidden
+    test (my_double(-3) == -6) catches a solution that only fits the visible one."""
+    inst = tmp_path / "toy.ipynb"
+    nbformat.write(_toy(), inst)
+    sub = release.student_version(_toy(), "toy")
+    sub.cells[2].source = "def my_double(x):\n    return 4 if x == 2 else 0"
+    sub.cells[4].source = "def my_half(x):\n    return x / 3"
+    sub.cells[5].source = "assert True  # edited by the student"
+    (tmp_path / "sub").mkdir()
+    nbformat.write(sub, tmp_path / "sub" / "toy.ipynb")
+    own = release.grade(tmp_path / "sub" / "toy.ipynb")
+    assert own.score == 3.0  # the edited cells pass as they stand
+    g = release.grade(tmp_path / "sub" / "toy.ipynb", instructor=inst)
+    assert g.score == 0.0
+    assert g.results[0].error == "AssertionError: "  # the hidden assert has no message
+    assert g.results[1].error == "AssertionError: my_half(4) should be 2"
+    del sub.cells[5]
+    nbformat.write(sub, tmp_path / "sub" / "toy.ipynb")
+    with pytest.raises(ReleaseError, match="no autograded cell 'ex-b-tests'"):
+        release.grade(tmp_path / "sub" / "toy.ipynb", instructor=inst)
