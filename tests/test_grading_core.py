@@ -134,3 +134,18 @@ def test_fmt_is_compact_and_deterministic():
     assert fmt(np.array([1.0, -2.5e-7, 0.0])) == "(1, -2.5e-07, 0)"
     assert fmt(np.eye(2)) == "[(1, 0), (0, 1)]"
     assert fmt(3.14159265) == "3.142" and fmt(None) == "None" and fmt(True) == "True"
+
+
+def test_a_wrong_return_structure_is_a_grading_error_not_a_crash():
+    with pytest.raises(GradingError, match=r"returned NoneType None .*number and order of the values"):
+        check_function(lambda p, m: None, observation.observe, CASES, name="my_observe",
+                       angles=[1], output=lambda out: out[0])
+    with pytest.raises(GradingError, match=r"returned tuple \(\(1, 2\), \[\(1, 0\), \(0, 1\)\]\)"):
+        check_jacobian(lambda p, m: (np.array([1.0, 2.0]), np.eye(2)), observation.observe,
+                       CASES, name="my_observe", rows=("range", "bearing"),
+                       cols=("x_i", "y_i"), output=lambda out: out[2])
+
+
+def test_a_passed_check_is_not_displayed_twice_in_a_notebook():
+    msg = obs(z_ref, quiet=True)
+    assert isinstance(msg, str) and msg._ipython_display_() is None

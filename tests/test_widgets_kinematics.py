@@ -87,3 +87,10 @@ def test_circumradius_and_bad_input():
         args = dict(speed=1.0, steering=0.1, dt=0.1) | kwargs
         with pytest.raises(ValueError):
             wk.arc_vs_euler(**args)
+
+
+def test_sliders_redraw_only_on_release(explorer):
+    """Each redraw chains hundreds of predict steps: no redraw while a slider is dragged."""
+    sliders = [c for c in explorer.children if hasattr(c, "continuous_update")]
+    assert {s.description.split()[0] for s in sliders} == {"speed", "steer", "dt"}
+    assert not any(s.continuous_update for s in sliders)

@@ -130,6 +130,8 @@ def test_explorer_follows_the_sliders(car_park, turn):
     align_box.value = False
     assert w.holder["summary"] == offset.offset_summary(turn, 0.0, 0.0, align=False)
     assert w.holder["summary"]["heading_correction_deg"] == 0.0
+    # Each redraw fits a heading and redraws the map: no redraw while a slider is dragged.
+    assert not a_slider.continuous_update and not b_slider.continuous_update
     plt.close("all")
 
 

@@ -19,7 +19,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-__all__ = ["GradingError", "Mistake", "call", "check_function", "check_jacobian", "check_raises",
+__all__ = ["GradingError", "Mistake", "Passed", "call", "check_function", "check_jacobian", "check_raises",
            "describe", "fail", "fmt", "NOT_WRITTEN"]
 
 NOT_WRITTEN = "is not written yet"
@@ -27,6 +27,14 @@ NOT_WRITTEN = "is not written yet"
 
 class GradingError(AssertionError):
     """An exercise check failed; the message says what, where, expected vs got, and why."""
+
+
+class Passed(str):
+    """The success message of a check. It is printed when the check runs; as the value of a
+    notebook cell's last line it displays nothing, so the message is not shown twice."""
+
+    def _ipython_display_(self) -> None:
+        pass
 
 
 @dataclass(frozen=True)
@@ -48,7 +56,10 @@ def fmt(x) -> str:
     """Compact, deterministic text for a number, vector or matrix (4 significant digits)."""
     if x is None:
         return "None"
-    a = np.asarray(x)
+    try:
+        a = np.asarray(x)
+    except ValueError:  # ragged, e.g. a tuple (vector, matrix)
+        return "(" + ", ".join(fmt(v) for v in x) + ")" if isinstance(x, (tuple, list)) else repr(x)
     if a.dtype == bool:
         return str(a.tolist())
     if not np.issubdtype(a.dtype, np.number):
@@ -123,7 +134,14 @@ def _evaluate(fn, reference, cases, *, name, arg_names, output, angle_mask, atol
         args = tuple(args)
         w = describe(args, arg_names)
         e = np.asarray(output(reference(*args)), dtype=float)
-        g = _as_numbers(name, output(call(fn, args, name=name, arg_names=arg_names)), e.shape, w)
+        raw = call(fn, args, name=name, arg_names=arg_names)
+        try:
+            part = output(raw)
+        except Exception:  # e.g. None or a 2-tuple where the check takes out[2]
+            raise GradingError(f"{name} returned {type(raw).__name__} {fmt(raw)} at {w}, which is "
+                               f"not what the exercise asks for (check the number and order of "
+                               f"the values you return)") from None
+        g = _as_numbers(name, part, e.shape, w)
         got.append(g)
         exp.append(e)
         where.append(w)
@@ -337,7 +355,7 @@ def check_function(fn: Callable, reference: Callable, cases: Sequence[Sequence],
                         angle_hint=angle_hint, matrix=False)
         raise GradingError(msg or _report(run, name=name, labels=labels, notes=_entry_notes(
             run, labels=labels, angle_mask=angle_mask, wrap_mask=wrap_mask, angle_hint=angle_hint)))
-    ok = f"✓ {name} agrees with {what} on {len(cases)} inputs."
+    ok = Passed(f"✓ {name} agrees with {what} on {len(cases)} inputs.")
     if not quiet:
         print(ok)
     return ok
@@ -369,7 +387,7 @@ def check_jacobian(fn: Callable, reference: Callable, cases: Sequence[Sequence],
                         mistakes=mistakes, cases=cases, angle_hint="", matrix=True)
         raise GradingError(msg or _report(run, name=name, labels=labels, notes=_entry_notes(
             run, labels=labels, angle_mask=no_angles, wrap_mask=no_angles, angle_hint="")))
-    ok = f"✓ {name} agrees with {what} on {len(cases)} inputs."
+    ok = Passed(f"✓ {name} agrees with {what} on {len(cases)} inputs.")
     if not quiet:
         print(ok)
     return ok
