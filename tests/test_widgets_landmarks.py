@@ -103,3 +103,23 @@ def test_draw_gates_draws_the_chi_square_ellipse():
     nu = np.column_stack([e[:, 1] - scene["zhat"][0, 0], np.radians(e[:, 0]) - scene["zhat"][0, 1]])
     d2 = np.einsum("ni,ij,nj->n", nu, np.linalg.inv(scene["S"][0]), nu)
     np.testing.assert_allclose(d2, 9.21, rtol=1e-9)
+
+
+def test_slow_sliders_wait_for_release(car_park):
+    """Re-extracting a scan and redrawing on every pixel of a drag would lag."""
+    scrub = wl.beacon_scrubber(car_park, start=92)
+    gate = wl.gate_explorer()
+    for w in (scrub, gate):
+        controls = w.children[:-1]
+        assert controls and all(c.continuous_update is False for c in controls)
+
+
+def test_scrubber_summary_follows_the_scan_slider(car_park):
+    """The slider's scan is the one summarised: its beacons are that scan's extraction."""
+    det = features.extract_beacons(car_park.laser)
+    w = wl.beacon_scrubber(car_park, start=0)
+    for k in (92, 320):
+        w.children[0].value = k
+        s = w.holder["summary"]
+        assert s["scan"] == k and s["t"] == pytest.approx(car_park.laser.t[k])
+        np.testing.assert_array_equal(s["z"], det[k])

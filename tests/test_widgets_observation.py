@@ -114,3 +114,24 @@ def test_explorer_shows_the_linearisation_failing_close_to_a_vague_pose():
                                   n_samples=4000)
     ratio = w.holder["summary"]["mc_sd_ratio"]
     assert ratio[0] < 0.85 and ratio[1] > 1.05
+
+
+def test_sliders_wait_for_release():
+    """Each move redraws a Monte-Carlo cloud: no update while a slider is dragged."""
+    w = wobs.measurement_explorer(n_samples=500)
+    assert len(sliders(w)) == 5
+    assert all(s.continuous_update is False for s in sliders(w).values())
+
+
+def test_landmark_sigma_slider_adds_its_variance_through_H_m():
+    """The range row of H_m is the unit line-of-sight vector and the bearing row has norm
+    1/r, so an isotropic landmark sigma adds sigma^2 to the range variance and
+    sigma^2 / r^2 to the bearing variance, and nothing to their covariance."""
+    w = wobs.measurement_explorer(landmark=(6.0, 8.0), sigma_xy=0.2, sigma_phi_deg=3.0,
+                                  n_samples=500)
+    s0 = w.holder["summary"]
+    sliders(w)["σ landmark"].value = 0.5
+    s1 = w.holder["summary"]
+    assert s1["range"] == pytest.approx(10.0)
+    dS = s1["S"] - s0["S"]
+    np.testing.assert_allclose(dS, np.diag([0.25, 0.25 / 100.0]), atol=1e-12)
