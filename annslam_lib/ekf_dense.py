@@ -13,18 +13,24 @@ Same models and the same interface as ``ekf_slam.EkfSlam``, written the way a te
               (``observation.inverse_observe``)
 
 Every step costs O(n^2) to O(n^3): fine for tens of landmarks, hopeless for hundreds.
+
+The single steps are also plain functions of (x, P), the references of notebook 05's graded
+exercises (``grading.ekf``): :func:`augment_landmark` (section 1, landmark augmentation),
+:func:`innovation`, :func:`kalman_gain`, :func:`joseph_covariance` and
+:func:`joseph_update` / :func:`range_bearing_update` (section 3, the update).
 """
 from __future__ import annotations
 
 import numpy as np
 
 from . import kinematics
-from .ekf_slam import check_initial
-from .geometry import wrap_angle
+from .ekf_slam import InnovationError, check_initial
+from .geometry import as_array, wrap_angle
 from .observation import inverse_observe, observe
 from .vehicle import Vehicle
 
-__all__ = ["DenseEkfSlam"]
+__all__ = ["DenseEkfSlam", "augment_landmark", "innovation", "kalman_gain", "joseph_covariance",
+           "joseph_update", "range_bearing_update"]
 
 
 class DenseEkfSlam:
@@ -177,3 +183,131 @@ class DenseEkfSlam:
 
     def health(self):
         return float(np.linalg.eigvalsh(self.P)[0]), float(np.max(np.abs(self.P - self.P.T)))
+
+
+# ------------------------------------------------------------ the steps as functions of (x, P)
+
+def _state(x, P) -> tuple[np.ndarray, np.ndarray]:
+    """x (n,) with n = 3 + 2N and P (n, n), finite; ValueError otherwise."""
+    x = as_array("x", x)
+    P = as_array("P", P)
+    if x.ndim != 1 or x.size < 3 or (x.size - 3) % 2:
+        raise ValueError(f"x must be a state (x, y, phi, x_1, y_1, ...) of size 3 + 2N, "
+                         f"got shape {x.shape}")
+    if P.shape != (x.size, x.size):
+        raise ValueError(f"P must be {x.size} x {x.size} for a state of size {x.size}, "
+                         f"got {P.shape}")
+    return x, P
+
+
+def _measurement(P, H, R) -> tuple[np.ndarray, np.ndarray]:
+    H = as_array("H", H)
+    R = as_array("R", R)
+    if H.ndim != 2 or H.shape[1] != P.shape[0]:
+        raise ValueError(f"H must be (m, {P.shape[0]}) for a state of size {P.shape[0]}, "
+                         f"got {H.shape}")
+    if R.shape != (H.shape[0], H.shape[0]):
+        raise ValueError(f"R must be {H.shape[0]} x {H.shape[0]} for {H.shape[0]} measurement "
+                         f"rows, got {R.shape}")
+    return H, R
+
+
+def augment_landmark(x, P, z, R):
+    """Landmark augmentation (notebook 05 section 1): the state and covariance with the
+    landmarks seen at measurements ``z`` appended.
+
+    x (n,), P (n, n); z (2,) or (k, 2) rows (range > 0, laser bearing); R (2, 2) the noise
+    covariance of one measurement. With l = g(X_v, z) and its Jacobians G_v (2x3), G_z
+    (2x2) from :func:`observation.inverse_observe`, each new landmark adds the blocks
+
+        x+ = [x; l],   P+ = [[P, P_{:,v} G_v^T], [G_v P_{v,:}, G_v P_vv G_v^T + G_z R G_z^T]]
+
+    (between two landmarks seen in the same scan, G_v,i P_vv G_v,j^T). Returns (x+, P+);
+    the same numbers as :meth:`DenseEkfSlam.augment`.
+    """
+    x, P = _state(x, P)
+    z = as_array("z", z, (2,)).reshape(-1, 2)
+    R = as_array("R", R)
+    if R.shape != (2, 2):
+        raise ValueError(f"R must be the 2 x 2 covariance of one (range, bearing), got {R.shape}")
+    lm, Gv, Gz = inverse_observe(x[:3], z)
+    Gv = Gv.reshape(-1, 3)                              # (2k, 3): all new rows at once
+    cross = Gv @ P[:3]                                  # (2k, n): G_v P_{v,:}
+    new = Gv @ P[:3, :3] @ Gv.T
+    for i in range(z.shape[0]):
+        b = slice(2 * i, 2 * i + 2)
+        new[b, b] += Gz[i] @ R @ Gz[i].T
+    P_new = np.block([[P, cross.T], [cross, new]])
+    return np.concatenate([x, lm.ravel()]), P_new
+
+
+def innovation(z, z_hat) -> np.ndarray:
+    """Innovation nu = z - z_hat of stacked (range, bearing) measurements (notebook 05
+    section 3), the bearing entries wrapped to (-pi, pi]: a bearing measured at -3.13 rad
+    and predicted at 3.13 rad is 0.02 rad off, not -6.26. z, z_hat (2m,) or (m, 2);
+    returns (2m,)."""
+    z = as_array("z", z).ravel()
+    z_hat = as_array("z_hat", z_hat).ravel()
+    if z.shape != z_hat.shape or z.size % 2:
+        raise ValueError(f"z and z_hat must hold the same (range, bearing) pairs, got sizes "
+                         f"{z.size} and {z_hat.size}")
+    nu = z - z_hat
+    nu[1::2] = wrap_angle(nu[1::2])
+    return nu
+
+
+def kalman_gain(P, H, R) -> tuple[np.ndarray, np.ndarray]:
+    """Optimal gain K = P H^T S^-1 and innovation covariance S = H P H^T + R (notebook 05
+    section 3). Raises :class:`ekf_slam.InnovationError` (a ValueError) if S is singular
+    or not positive definite (smallest eigenvalue <= 1e-12 of its largest): no gain
+    exists, e.g. a perfectly known state measured without noise."""
+    P = as_array("P", P)
+    H, R = _measurement(P, H, R)
+    S = H @ P @ H.T + R
+    w = np.linalg.eigvalsh(0.5 * (S + S.T))
+    if not w[0] > 1e-12 * max(abs(w[-1]), 1e-300):
+        raise InnovationError(f"the innovation covariance S = H P H^T + R is singular or not "
+                              f"positive definite (eigenvalues {w[0]:.3g} .. {w[-1]:.3g}): "
+                              f"no Kalman gain exists")
+    return P @ H.T @ np.linalg.inv(S), S
+
+
+def joseph_covariance(P, H, R, K) -> np.ndarray:
+    """Joseph form of the covariance update, P+ = (I - K H) P (I - K H)^T + K R K^T
+    (notebook 05 section 3): the covariance of x + K (z - H x) for ANY gain K, symmetric
+    and positive semi-definite by construction. The short forms (I - K H) P and
+    P - K S K^T equal it only for the optimal gain of :func:`kalman_gain`."""
+    P = as_array("P", P)
+    if P.ndim != 2 or P.shape[0] != P.shape[1]:
+        raise ValueError(f"P must be square, got {P.shape}")
+    H, R = _measurement(P, H, R)
+    K = as_array("K", K)
+    if K.shape != H.T.shape:
+        raise ValueError(f"K must be {H.shape[1]} x {H.shape[0]} (state x measurement), "
+                         f"got {K.shape}")
+    IKH = np.eye(P.shape[0]) - K @ H
+    return IKH @ P @ IKH.T + K @ R @ K.T
+
+
+def joseph_update(x, P, nu, H, R) -> tuple[np.ndarray, np.ndarray]:
+    """EKF update with the innovation ``nu`` (notebook 05 section 3): K from
+    :func:`kalman_gain`, x+ = x + K nu (heading wrapped to (-pi, pi]), P+ from
+    :func:`joseph_covariance`. The arithmetic of :meth:`DenseEkfSlam.update`.
+    Raises InnovationError for a singular S."""
+    x, P = _state(x, P)
+    H, R = _measurement(P, H, R)
+    nu = as_array("nu", nu).ravel()
+    if nu.size != H.shape[0]:
+        raise ValueError(f"nu has {nu.size} entries but H has {H.shape[0]} rows")
+    K, _ = kalman_gain(P, H, R)
+    x_new = x + K @ nu
+    x_new[2] = float(wrap_angle(x_new[2]))
+    return x_new, joseph_covariance(P, H, R, K)
+
+
+def range_bearing_update(x, P, z, z_hat, H, R) -> tuple[np.ndarray, np.ndarray]:
+    """EKF update from stacked (range, bearing) measurements ``z`` and their predictions
+    ``z_hat`` (notebook 05 section 3, graded exercise): :func:`joseph_update` with the
+    wrapped :func:`innovation`. x (n,), P (n, n), z and z_hat (2m,), H (2m, n), R (2m, 2m).
+    Returns (x+, P+); raises InnovationError (a ValueError) for a singular S."""
+    return joseph_update(x, P, innovation(z, z_hat), H, R)

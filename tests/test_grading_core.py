@@ -134,6 +134,8 @@ def test_fmt_is_compact_and_deterministic():
     assert fmt(np.array([1.0, -2.5e-7, 0.0])) == "(1, -2.5e-07, 0)"
     assert fmt(np.eye(2)) == "[(1, 0), (0, 1)]"
     assert fmt(3.14159265) == "3.142" and fmt(None) == "None" and fmt(True) == "True"
+    assert fmt(-2 * np.eye(23)) == "<23x23 array, max |entry| 2>"
+    assert fmt((np.ones(2), np.eye(2))) == "((1, 1), [(1, 0), (0, 1)])"
 
 
 def test_a_wrong_return_structure_is_a_grading_error_not_a_crash():

@@ -83,6 +83,8 @@ def test_explorer_follows_its_sliders(car_park, full_run):
     image follow (the summary equals the pure function's with the same configuration)."""
     w = ws.slam_explorer(car_park, t_end=40.0)
     t_slider, speed, steer, rng, bearing, gate = w.children[:6]
+    # every slider re-runs the filter (0.2 s): it fires on release only
+    assert all(not s.continuous_update for s in w.children[:6])
     first = w.holder["summary"]
     image, text = w.children[6:8]
     png = image.value

@@ -140,9 +140,14 @@ def test_scrubber_follows_the_slider(sim_run):
     assert w.holder["summary"]["t"] == 12.0
     assert w.children[0].min == int(np.ceil(r.trajectory[0, 0]))
     assert w.children[0].max == int(np.floor(r.trajectory[-1, 0]))
+    assert not w.children[0].continuous_update          # one redraw per release, not per pixel
+    first = w.holder["summary"]
     w.children[0].value = 25
     s = w.holder["summary"]
     assert s["t"] == 25.0 and s["fix"] is None
+    row = np.searchsorted(r.trajectory[:, 0], 25.0, side="right") - 1
+    np.testing.assert_array_equal(s["pose"], r.trajectory[row, 1:4])
+    assert s["landmarks"] >= first["landmarks"] and s["row"] > first["row"]
     assert s["landmarks"] == wv.run_snapshot(r, gps, 25.0)["landmarks"]
 
 

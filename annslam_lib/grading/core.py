@@ -65,6 +65,8 @@ def fmt(x) -> str:
     if not np.issubdtype(a.dtype, np.number):
         return repr(x)
     a = a.astype(float)
+    if a.size > 12:  # a whole covariance matrix would drown the message
+        return f"<{'x'.join(map(str, a.shape))} array, max |entry| {np.nanmax(np.abs(a)):.4g}>"
     if a.ndim == 0:
         v = float(a)
         return "0" if v == 0 else f"{v:.4g}"
@@ -137,6 +139,8 @@ def _evaluate(fn, reference, cases, *, name, arg_names, output, angle_mask, atol
         raw = call(fn, args, name=name, arg_names=arg_names)
         try:
             part = output(raw)
+        except GradingError:
+            raise
         except Exception:  # e.g. None or a 2-tuple where the check takes out[2]
             raise GradingError(f"{name} returned {type(raw).__name__} {fmt(raw)} at {w}, which is "
                                f"not what the exercise asks for (check the number and order of "
