@@ -90,6 +90,8 @@ def test_plot_hidden_grid_shows_means_and_baselines(grid):
 def test_explorer_follows_the_sliders(grid):
     g, _ = grid
     w = wann.hidden_size_explorer(g, hidden=1, seed=0)
+    # the plots are redrawn on release only, not at every intermediate slider position
+    assert w.children[0].continuous_update is False and w.children[1].continuous_update is False
     s = w.holder["summary"]
     m = g.models[(1, 0)]
     assert (s["hidden"], s["seed"], s["best_epoch"], s["epochs"]) == (1, 0, m.best_epoch, m.epochs)

@@ -17,7 +17,7 @@ from scipy.stats import chi2
 
 from ..association import GATE, NEW, NEW_LANDMARK, REJECTED, associate, mahalanobis
 from ..observation import observe
-from .core import Mistake, call, check_function, check_raises, describe, fail, fmt
+from .core import Passed, Mistake, call, check_function, check_raises, describe, fail, fmt
 
 __all__ = ["check_innovation_d2", "check_in_gate", "check_associate"]
 
@@ -165,7 +165,7 @@ def check_innovation_d2(fn, *, seed: int = 0, n: int = 40,
           f"ValueError for all {len(bad)} S that are not positive definite.")
     if not quiet:
         print(ok)
-    return ok
+    return Passed(ok)
 
 
 # ----------------------------------------------------------------------------- 4.2 gate
@@ -262,7 +262,7 @@ def check_in_gate(fn, *, seed: int = 0, n: int = 40, name: str = "my_in_gate",
     ok = f"✓ {name} agrees with the chi-square gate on {len(cases)} inputs."
     if not quiet:
         print(ok)
-    return ok
+    return Passed(ok)
 
 
 # ----------------------------------------------------------------------------- 4.3 associate
@@ -404,4 +404,4 @@ def check_associate(fn, *, seed: int = 0, n: int = 40, name: str = "my_associate
     ok = f"✓ {name} agrees with association.associate on {len(scenes)} scenes."
     if not quiet:
         print(ok)
-    return ok
+    return Passed(ok)

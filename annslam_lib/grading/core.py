@@ -40,7 +40,9 @@ class Passed(str):
 @dataclass(frozen=True)
 class Mistake:
     """A known wrong answer: if the student's output equals ``wrong(*args)`` on every case
-    (within tolerance), the check fails with ``message`` instead of a generic diff."""
+    (within tolerance), the check fails with ``message`` instead of a generic diff.
+    ``wrong`` returns the COMPARED part (what a check's ``output=`` extracts), not the whole
+    return value."""
     message: str
     wrong: Callable[..., Any]
 
@@ -178,13 +180,13 @@ def _close(a, b, tol) -> bool:
 
 
 def _diagnose(run: _Run, *, name, labels, angle_mask, wrap_mask, mistakes, cases,
-              angle_hint: str, matrix: bool) -> str | None:
+              angle_hint: str, matrix: bool, output: Callable = lambda out: out) -> str | None:
     """A message for a recognisable pattern of failure, or None."""
     got, exp, tol = run.got, run.exp, run.tol
     # 1. NaN or inf where the reference is finite
     nonfinite = ~np.isfinite(got) & np.isfinite(exp)
     if nonfinite.any():
-        k, *idx = np.argwhere(nonfinite)[0]
+        k, *idx = (int(i) for i in np.argwhere(nonfinite)[0])
         msg = (f"{name} returned {fmt(got[(k, *idx)])} for {_label(labels, tuple(idx))} at "
                f"{run.where[k]}; expected {fmt(exp[(k, *idx)])}.")
         if angle_mask[tuple(idx)]:
@@ -356,7 +358,7 @@ def check_function(fn: Callable, reference: Callable, cases: Sequence[Sequence],
     if run.bad.any():
         msg = _diagnose(run, name=name, labels=labels, angle_mask=angle_mask,
                         wrap_mask=wrap_mask, mistakes=mistakes, cases=cases,
-                        angle_hint=angle_hint, matrix=False)
+                        angle_hint=angle_hint, matrix=False, output=output)
         raise GradingError(msg or _report(run, name=name, labels=labels, notes=_entry_notes(
             run, labels=labels, angle_mask=angle_mask, wrap_mask=wrap_mask, angle_hint=angle_hint)))
     ok = Passed(f"✓ {name} agrees with {what} on {len(cases)} inputs.")
@@ -388,7 +390,8 @@ def check_jacobian(fn: Callable, reference: Callable, cases: Sequence[Sequence],
     labels = (list(rows), list(cols))
     if run.bad.any():
         msg = _diagnose(run, name=name, labels=labels, angle_mask=no_angles, wrap_mask=no_angles,
-                        mistakes=mistakes, cases=cases, angle_hint="", matrix=True)
+                        mistakes=mistakes, cases=cases, angle_hint="", matrix=True,
+                        output=output)
         raise GradingError(msg or _report(run, name=name, labels=labels, notes=_entry_notes(
             run, labels=labels, angle_mask=no_angles, wrap_mask=no_angles, angle_hint="")))
     ok = Passed(f"✓ {name} agrees with {what} on {len(cases)} inputs.")

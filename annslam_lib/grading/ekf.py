@@ -24,7 +24,7 @@ import numpy as np
 from .. import ekf_dense
 from ..geometry import wrap_angle
 from ..observation import inverse_observe, observe
-from .core import NOT_WRITTEN, GradingError, Mistake, call, check_function, check_raises, fmt
+from .core import Passed, NOT_WRITTEN, GradingError, Mistake, call, check_function, check_raises, fmt
 
 __all__ = ["check_augment", "check_joseph_covariance", "check_ekf_update"]
 
@@ -305,7 +305,7 @@ def check_augment(fn: Callable, *, seed: int = 0, n: int = 6) -> str:
     ok = (f"✓ {name} agrees with the reference augmentation on {len(table)} SLAM states "
           f"(x_new and P_new, symmetric).")
     print(ok)
-    return ok
+    return Passed(ok)
 
 
 # ------------------------------------------------------------------------------ update
@@ -431,7 +431,7 @@ def check_joseph_covariance(fn: Callable, *, seed: int = 0, n: int = 4) -> str:
     ok = (f"✓ {name} agrees with the Joseph form on {len(table)} updates with optimal and "
           f"non-optimal gains (symmetric).")
     print(ok)
-    return ok
+    return Passed(ok)
 
 
 def _update_cases(seed: int, n: int) -> dict:
@@ -573,4 +573,4 @@ def check_ekf_update(fn: Callable, *, seed: int = 0, n: int = 5) -> str:
     ok = (f"✓ {name} agrees with the reference update on {len(table)} SLAM states (x_new and "
           f"P_new, symmetric) and rejects {len(singular)} singular innovation covariances.")
     print(ok)
-    return ok
+    return Passed(ok)

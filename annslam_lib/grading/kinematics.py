@@ -28,7 +28,7 @@ import numpy as np
 from .. import kinematics, paper
 from ..geometry import numerical_jacobian, wrap_angle
 from ..vehicle import ACFR_UTE, Vehicle
-from .core import GradingError, Mistake, call, check_function, check_jacobian, describe, fmt
+from .core import Passed, GradingError, Mistake, call, check_function, check_jacobian, describe, fmt
 
 __all__ = ["check_axle_speed", "check_euler_step", "check_process_jacobians", "check_laser_pose",
            "check_laser_velocity", "check_laser_pose_jacobian"]
@@ -380,7 +380,7 @@ def check_process_jacobians(fn: Callable, *, seed: int = 0, n: int = 30,
     msg = f"✓ {name}: F and G agree with kinematics.predict on {len(cases)} inputs."
     if not quiet:
         print(msg)
-    return msg
+    return Passed(msg)
 
 
 # ------------------------------------------------------------------ 02, exercise 2.1

@@ -1,0 +1,319 @@
+"""Checks for the graded exercises of notebook 08 "ANN-enhanced SLAM: the verdict".
+
+The verdict rests on error metrics; the exercises grade three of them:
+
+- :func:`check_rigid_align`: the best rigid 2-D motion of the mapped landmarks onto the
+  surveyed ones (Kabsch without scale, no reflection), against ``map_metrics.rigid_align``;
+- :func:`check_aligned_rmse`: the map RMSE after that alignment (:func:`aligned_rmse`, the
+  ``map_rmse_aligned`` of ``reproduce.METRICS``);
+- :func:`check_regression`: nntool's regression line and correlation coefficient R of the
+  paper's Figure 8 (:func:`regression_line`, what ``ann.regression`` computes per part).
+
+The paper prints no equation for any of them (sections 4.3 and 5 make claims, see
+``paper.ERRATA``), so the known mistakes are the usual ones: no alignment, a reflection or a
+scale allowed, the mean instead of the root mean square, R^2 for R, the regression the wrong
+way round.
+"""
+from __future__ import annotations
+
+import math
+from typing import Callable
+
+import numpy as np
+
+from ..map_metrics import rigid_align
+from .core import Passed, GradingError, Mistake, check_function, check_raises
+
+__all__ = ["check_rigid_align", "aligned_rmse", "check_aligned_rmse", "regression_line",
+           "check_regression"]
+
+_RT_LABELS = ("R[0, 0]", "R[0, 1]", "R[1, 0]", "R[1, 1]", "t_x", "t_y")
+
+
+def _copying(fn: Callable) -> Callable:
+    """Call ``fn`` on copies, so a student function that edits its input in place cannot
+    change the cases the check compares afterwards."""
+    def run(*args):
+        return fn(*(a.copy() if isinstance(a, np.ndarray) else a for a in args))
+    return run
+
+
+def _rot(a: float) -> np.ndarray:
+    return np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+
+
+def _pairs(seed: int, n: int) -> list[tuple]:
+    """(a, b) paired landmark sets: the cases that separate the known mistakes first (two
+    points only, collinear points, a mirrored map where a reflection would fit better, a
+    shrunken one where a scale would), then b = R a + t + noise for ``n`` seeded motions,
+    the first a rotation near 180 degrees."""
+    rng = np.random.default_rng(seed)
+    cases = []
+    a = rng.uniform(-20, 20, (2, 2))
+    cases.append((a, a @ _rot(0.7).T + np.array([3.0, -1.0]) + rng.normal(0, 0.2, (2, 2))))
+    t = np.linspace(-10, 10, 4)
+    a = np.c_[t, 0.5 * t + 2]
+    cases.append((a, a @ _rot(-1.2).T + np.array([-4.0, 6.0]) + rng.normal(0, 0.1, (4, 2))))
+    a = rng.uniform(-15, 15, (4, 2))
+    cases.append((a, a * np.array([1.0, -1.0]) @ _rot(0.4).T + rng.normal(0, 0.3, (4, 2))))
+    a = rng.uniform(-15, 15, (4, 2))
+    cases.append((a, 0.8 * a @ _rot(2.0).T + np.array([1.0, 2.0]) + rng.normal(0, 0.05, (4, 2))))
+    for k in range(n):
+        K = int(rng.integers(3, 9))
+        a = rng.uniform(-25, 25, (K, 2))
+        ang = rng.uniform(-np.pi, np.pi) if k else np.pi - 0.01
+        b = a @ _rot(ang).T + rng.uniform(-10, 10, 2) + rng.normal(0, 0.1, (K, 2))
+        cases.append((a, b))
+    return cases
+
+
+def _svd(a, b, center=True):
+    ca, cb = a.mean(axis=0), b.mean(axis=0)
+    da, db = (a - ca, b - cb) if center else (a, b)
+    U, S, Vt = np.linalg.svd(da.T @ db)
+    return ca, cb, da, U, S, Vt
+
+
+def _wrong_rt_packed(kind: str):
+    """:func:`_wrong_rt` as the 6-vector the check compares."""
+    def f(a, b):
+        R, t = _wrong_rt(kind)(a, b)
+        return np.concatenate([R.ravel(), t])
+    return f
+
+
+def _wrong_rt(kind: str):
+    """The known wrong alignments (each returns (R, t))."""
+    def f(a, b):
+        a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+        ca, cb, da, U, S, Vt = _svd(a, b, center=(kind != "uncentred"))
+        if kind == "reflection":
+            R = Vt.T @ U.T
+        elif kind == "scale":
+            R0, _ = rigid_align(a, b)
+            s = np.trace(np.diag(S) @ np.diag([1.0, np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0])) \
+                / np.sum(da ** 2)
+            R = s * R0
+        else:
+            d = np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0
+            R = Vt.T @ np.diag([1.0, d]) @ U.T
+        if kind == "transposed":
+            R = R.T
+        if kind == "reversed":
+            R, t = rigid_align(b, a)
+            return R, t
+        t = cb - ca if kind == "no_rotation_in_t" else cb - R @ ca
+        return R, t
+    return f
+
+
+def _packed(fn: Callable, name: str) -> Callable:
+    """``fn(a, b)``'s (R, t) as the 6-vector the check compares; a result that is not such a
+    pair is reported as what it is (raised inside the call, so the message stays ours)."""
+    def packed(a, b):
+        o = fn(a.copy(), b.copy())
+        if isinstance(o, np.ndarray) or not isinstance(o, (tuple, list)) or len(o) != 2:
+            raise GradingError(f"{name} must return a pair (R, t): R of shape (2, 2) and t of "
+                               f"shape (2,); got {type(o).__name__} {o!r:.80}")
+        try:
+            R, t = np.asarray(o[0], dtype=float), np.asarray(o[1], dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            raise GradingError(f"{name} must return (R, t) as numbers; got {o!r:.80}") from None
+        if R.shape != (2, 2) or t.shape != (2,):
+            raise GradingError(f"{name} must return (R, t) with R of shape (2, 2) and t of "
+                               f"shape (2,); got {R.shape} and {t.shape}")
+        return np.concatenate([R.ravel(), t])
+    return packed
+
+
+def check_rigid_align(fn: Callable, *, seed: int = 0, n: int = 6, quiet: bool = False) -> str:
+    """Exercise 8.1 (notebook 08, section 4): ``fn(a, b)`` returns the rotation R (2, 2) and
+    translation t (2,) minimising sum |R a_i + t - b_i|^2 (Kabsch without scale, no
+    reflection; ``map_metrics.rigid_align``) on seeded point sets and the edge cases of
+    :func:`_pairs`."""
+    name = getattr(fn, "__name__", "my_rigid_align")
+    msg_ok = check_function(
+        _packed(fn, name), _packed(rigid_align, "rigid_align"), _pairs(seed, n), name=name,
+        arg_names=["a", "b"], labels=_RT_LABELS, atol=1e-7, rtol=1e-6, quiet=True,
+        what="map_metrics.rigid_align",
+        mistakes=[
+            Mistake(f"{name} returns a REFLECTION (det R = -1) where a mirror image fits better: "
+                    "R = V U^T must be corrected to V diag(1, det(V U^T)) U^T. A map may be "
+                    "rotated and shifted into the survey's frame, never mirrored.",
+                    _wrong_rt_packed("reflection")),
+            Mistake(f"{name} includes a SCALE factor in R (Umeyama's similarity): the rigid "
+                    "alignment is a rotation and a translation only; a map's size is part of "
+                    "its error, not of its frame.", _wrong_rt_packed("scale")),
+            Mistake(f"{name} returns R transposed (the rotation the other way): with "
+                    "C = sum (a_i - a_bar)(b_i - b_bar)^T = U S V^T, R = V diag(1, d) U^T, not "
+                    "U diag(1, d) V^T.", _wrong_rt_packed("transposed")),
+            Mistake(f"{name} aligns b onto a (the true landmarks onto the map); the map a is "
+                    "the one to move: R a_i + t ~ b_i.", _wrong_rt_packed("reversed")),
+            Mistake(f"{name} forgets the centroids: subtract a_bar and b_bar before forming "
+                    "the cross-covariance C = sum (a_i - a_bar)(b_i - b_bar)^T.",
+                    _wrong_rt_packed("uncentred")),
+            Mistake(f"{name} has the right R but t = b_bar - a_bar; the translation moves the "
+                    "ROTATED centroid: t = b_bar - R a_bar.", _wrong_rt_packed("no_rotation_in_t")),
+        ])
+    ok = msg_ok.replace(" inputs.", " inputs (a near-180° rotation, 2 points, collinear, "
+                                   "mirrored and shrunken maps included).")
+    if not quiet:
+        print(ok)
+    return Passed(ok)
+
+
+def aligned_rmse(a, b) -> float:
+    """Root mean square of the Euclidean distances |R a_i + t - b_i| after the best rigid
+    alignment (``map_metrics.rigid_align``) of the paired points a, b (K, 2), K >= 2 (m):
+    ``map_metrics.map_errors(...).rmse_aligned`` without the matching (notebook 08,
+    exercise 8.2). Raises ValueError for fewer than 2 pairs."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    R, t = rigid_align(a, b)
+    d = a @ R.T + t - b
+    return float(np.sqrt(np.mean(np.sum(d * d, axis=1))))
+
+
+def _wrong_rmse(kind: str):
+    def f(a, b):
+        a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+        if kind in ("reflection", "scale"):
+            R, t = _wrong_rt(kind)(a, b)
+        else:
+            R, t = rigid_align(a, b)
+        if kind == "absolute":
+            R, t = np.eye(2), np.zeros(2)
+        if kind == "centroid":
+            R, t = np.eye(2), b.mean(axis=0) - a.mean(axis=0)
+        d = (a @ R if kind == "transposed" else a @ R.T) + t - b
+        e2 = np.sum(d * d, axis=1)
+        return {"mean": float(np.mean(np.sqrt(e2))), "coords": float(np.sqrt(np.mean(d * d))),
+                "mse": float(np.mean(e2))}.get(kind, float(np.sqrt(np.mean(e2))))
+    return f
+
+
+def check_aligned_rmse(fn: Callable, *, seed: int = 0, n: int = 6, quiet: bool = False) -> str:
+    """Exercise 8.2 (notebook 08, section 4): ``fn(mapped, true)`` returns the map RMSE after
+    the best rigid alignment (:func:`aligned_rmse`) for paired landmarks, and raises
+    ValueError for fewer than 2 pairs."""
+    name = getattr(fn, "__name__", "my_aligned_rmse")
+    msg_ok = check_function(
+        _copying(fn), aligned_rmse, _pairs(seed, n), name=name, arg_names=["mapped", "true"],
+        atol=1e-9, rtol=1e-7, quiet=True, what="the aligned map RMSE (map_metrics)",
+        mistakes=[
+            Mistake(f"{name} returns the RMSE WITHOUT the alignment (the absolute error, "
+                    "reproduce's map_rmse): apply R, t = rigid_align(mapped, true) to the "
+                    "mapped landmarks first.", _wrong_rmse("absolute")),
+            Mistake(f"{name} only shifts the centroids together; the alignment also rotates: "
+                    "R, t = rigid_align(mapped, true).", _wrong_rmse("centroid")),
+            Mistake(f"{name} returns the MEAN distance; the RMSE is the root of the mean "
+                    "SQUARED distance, sqrt(mean(|e_i|^2)), which weighs large errors more.",
+                    _wrong_rmse("mean")),
+            Mistake(f"{name} averages the squared errors over the 2K coordinates (a factor "
+                    "1/sqrt(2) too small); the map RMSE averages the squared Euclidean "
+                    "distances over the K landmarks: sqrt(mean(dx^2 + dy^2)).",
+                    _wrong_rmse("coords")),
+            Mistake(f"{name} returns the mean squared error (m^2): take its square root.",
+                    _wrong_rmse("mse")),
+            Mistake(f"{name} applies R transposed: for points stored as rows a (K, 2) the "
+                    "rotated points are a @ R.T (R a_i for every row), then + t.",
+                    _wrong_rmse("transposed")),
+            Mistake(f"{name} lets the alignment mirror the map (det R = -1), which hides a "
+                    "real error; use the rotation of map_metrics.rigid_align.",
+                    _wrong_rmse("reflection")),
+            Mistake(f"{name} lets the alignment scale the map, which hides a real error (a "
+                    "map that is too small); rotation and translation only.",
+                    _wrong_rmse("scale")),
+        ])
+    check_raises(fn, (np.array([[1.0, 2.0]]), np.array([[0.0, 1.0]])), name=name,
+                 arg_names=["mapped", "true"],
+                 why="one landmark pair cannot be aligned (the rotation is undefined)")
+    if not quiet:
+        print(msg_ok)
+    return msg_ok
+
+
+def regression_line(outputs, targets) -> tuple[float, float, float]:
+    """nntool's regression plot (paper Figure 8; ``ann.regression`` per part): both
+    coordinates pooled, the least-squares line output = slope * target + intercept and the
+    correlation coefficient R of outputs and targets. outputs, targets (n, 2) or (n,);
+    returns (slope, intercept, R). Raises ValueError for mismatched shapes, fewer than 2
+    values, or constant targets or outputs (R undefined)."""
+    o = np.asarray(outputs, dtype=float)
+    g = np.asarray(targets, dtype=float)
+    if o.shape != g.shape:
+        raise ValueError(f"outputs and targets must have the same shape, got {o.shape} and {g.shape}")
+    o, g = o.ravel(), g.ravel()
+    if o.size < 2 or not (np.all(np.isfinite(o)) and np.all(np.isfinite(g))):
+        raise ValueError("need at least 2 finite values")
+    if np.ptp(g) == 0 or np.ptp(o) == 0:
+        raise ValueError("constant targets or outputs: the correlation R is undefined")
+    do, dg = o - o.mean(), g - g.mean()
+    slope = float(dg @ do / (dg @ dg))
+    r = float(dg @ do / math.sqrt((dg @ dg) * (do @ do)))
+    return slope, float(o.mean() - slope * g.mean()), r
+
+
+def _reg_cases(seed: int, n: int) -> list[tuple]:
+    """(outputs, targets) pairs: landmark positions tens of metres apart with errors of
+    centimetres (R ~ 1), corrections of centimetres learned partly (R ~ 0.5), one learned
+    the wrong way (R < 0), and outputs with a bias and a gain."""
+    rng = np.random.default_rng(seed)
+    cases = []
+    for k in range(n):
+        m = 6
+        if k % 3 == 0:
+            tgt = rng.uniform(-23, 17, (m, 2))
+            out = tgt + rng.normal(0, 0.1, (m, 2))
+        elif k % 3 == 1:
+            tgt = rng.normal(0, 0.1, (m, 2))
+            out = 0.5 * tgt + rng.normal(0, 0.06, (m, 2))
+        else:
+            tgt = rng.normal(0, 0.1, (m, 2))
+            out = -0.4 * tgt + 0.02 + rng.normal(0, 0.05, (m, 2))
+        cases.append((out, tgt))
+    tgt = rng.uniform(-5, 5, (6, 2))
+    cases.append((1.3 * tgt + 0.7 + rng.normal(0, 0.5, (6, 2)), tgt))
+    return cases
+
+
+def _wrong_reg(kind: str):
+    def f(o, g):
+        o, g = np.asarray(o, dtype=float), np.asarray(g, dtype=float)
+        if kind == "x_only":
+            return regression_line(o[:, 0], g[:, 0])
+        s, c, r = regression_line(o, g)
+        if kind == "r2":
+            return s, c, r * r
+        if kind == "swapped":
+            s2, c2, _ = regression_line(g, o)
+            return s2, c2, r
+        if kind == "ddof":
+            n = o.size
+            return s, c, r * n / (n - 1)
+        return s, c, r
+    return f
+
+
+def check_regression(fn: Callable, *, seed: int = 0, n: int = 6, quiet: bool = False) -> str:
+    """Exercise 8.3 (notebook 08, section 5): ``fn(outputs, targets)`` returns (slope,
+    intercept, R) of :func:`regression_line`: both coordinates pooled, output = slope *
+    target + intercept, R the correlation coefficient."""
+    name = getattr(fn, "__name__", "my_regression")
+    return check_function(
+        _copying(fn), regression_line, _reg_cases(seed, n), name=name,
+        arg_names=["outputs", "targets"],
+        labels=("slope", "intercept", "R"), atol=1e-9, rtol=1e-7,
+        what="nntool's regression (ann.regression)", quiet=quiet,
+        mistakes=[
+            Mistake(f"{name} returns R^2 (the coefficient of determination) as R; nntool's "
+                    "regression plot shows R, the correlation coefficient, which is negative "
+                    "when the outputs go the wrong way.", _wrong_reg("r2")),
+            Mistake(f"{name} fits the line the wrong way round (targets on outputs): nntool "
+                    "fits Output = slope * Target + intercept, targets on the x-axis.",
+                    _wrong_reg("swapped")),
+            Mistake(f"{name} uses the x coordinates only; nntool pools every output value: "
+                    "flatten both (n, 2) arrays (.ravel()) first.", _wrong_reg("x_only")),
+            Mistake(f"{name}'s R is n / (n - 1) times too large: the covariance and the "
+                    "standard deviations must use the same normalisation (np.cov has "
+                    "ddof=1, np.std ddof=0); np.corrcoef avoids the issue.", _wrong_reg("ddof")),
+        ])
