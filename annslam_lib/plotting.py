@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.figure import Figure
 
 from .records import Dataset, Laser
 from .vehicle import Vehicle
@@ -18,6 +19,27 @@ def _axes(ax=None, figsize=(6, 6)):
     if ax is None:
         _, ax = plt.subplots(figsize=figsize)
     return ax
+
+
+def widget_figure(nrows: int = 1, ncols: int = 1, *, figsize, **subplots_kw):
+    """A Figure made outside pyplot and its axes (``Figure.subplots(nrows, ncols, **subplots_kw)``),
+    for a widget callback to draw on; show it with :func:`show_widget_figure`.
+
+    With JupyterLab 4.6 and ipykernel 7 a kernel subshell thread runs matplotlib-inline's
+    ``flush_figures`` while a callback is still drawing, showing and closing every open pyplot
+    figure (blank or half-drawn plots, found by tests/test_browser.py); pyplot never sees this one."""
+    fig = Figure(figsize=figsize)
+    return fig, fig.subplots(nrows, ncols, **subplots_kw)
+
+
+def show_widget_figure(fig: Figure) -> None:
+    """Display a :func:`widget_figure` in the callback's Output (instead of ``plt.show()``).
+
+    Explicit display, because no pyplot flush knows about the figure; nothing else can show
+    it early from another thread, which is the point (see :func:`widget_figure`)."""
+    from IPython.display import display  # only widgets need IPython
+
+    display(fig)
 
 
 def plot_map(ds: Dataset, ax=None, *, gps_label: str = "GPS track (laser point)",

@@ -87,8 +87,10 @@ def test_plot_hidden_grid_shows_means_and_baselines(grid):
     assert lines["current_chronological test"].get_ydata()[0] == g.chrono[1, 1]
 
 
-def test_explorer_follows_the_sliders(grid):
+def test_explorer_follows_the_sliders(grid, monkeypatch):
     g, _ = grid
+    shown = []
+    monkeypatch.setattr(wann, "show_widget_figure", shown.append)
     w = wann.hidden_size_explorer(g, hidden=1, seed=0)
     # the plots are redrawn on release only, not at every intermediate slider position
     assert w.children[0].continuous_update is False and w.children[1].continuous_update is False
@@ -96,13 +98,17 @@ def test_explorer_follows_the_sliders(grid):
     m = g.models[(1, 0)]
     assert (s["hidden"], s["seed"], s["best_epoch"], s["epochs"]) == (1, 0, m.best_epoch, m.epochs)
     assert s["chrono_rmse"] == g.chrono[0, 0] and s["lbo_mean"] == pytest.approx(g.lbo[0].mean())
+    plt.close("all")
     w.children[0].value = 4
     w.children[1].value = 2
     s = w.holder["summary"]
     assert (s["hidden"], s["seed"]) == (4, 2)
+    # The callback draws outside pyplot (plotting.widget_figure): nothing is left open for a
+    # kernel thread's flush_figures to show half drawn.
+    assert plt.get_fignums() == []
     assert s["lbo_rmse"] == g.lbo[1, 1] and s["n_params"] == g.n_params[1]
     # The left panel is that network's performance plot: its lines are its history.
-    perf = plt.gcf().axes[0]
+    perf = shown[-1].axes[0]
     val = [ln for ln in perf.lines if ln.get_gid() == "mse_val"][0]
     np.testing.assert_array_equal(val.get_ydata(), g.models[(4, 2)].history["val"])
     assert s["best_val_mse"] == min(val.get_ydata())

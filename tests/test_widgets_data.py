@@ -4,11 +4,17 @@ import matplotlib
 matplotlib.use("Agg")  # headless: set in the test, never exported to notebook kernels
 
 import matplotlib.pyplot as plt  # noqa: E402
+import re  # noqa: E402
+
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 import scipy.io  # noqa: E402
 
 from annslam_lib import fetch, plotting, simulate, widgets  # noqa: E402
+from annslam_lib.widgets.data import scan_readout  # noqa: E402
+
+READOUT = re.compile(r"scan (\d+)  t = ([\d.]+) s  returns (\d+)  bright beams (\d+)"
+                     r"(?: \(([\d.]+)-([\d.]+) m\))?")
 
 
 def test_scan_summary_counts_match_the_raw_file(car_park):
@@ -29,6 +35,43 @@ def test_scan_scrubber_follows_the_slider(car_park):
     assert w.holder["summary"] == widgets.scan_summary(car_park.laser, 300, max_range=20)
     assert w.children[0].max == len(car_park.laser) - 1
     plt.close("all")
+
+
+def test_scan_readout_formats_the_summary():
+    s = {"scan": 7, "t": 1.234, "returns": 99, "bright_beams": 3, "bright_range": (4.005, 12.5)}
+    assert scan_readout(s) == "scan 7  t = 1.23 s  returns 99  bright beams 3 (4.00-12.50 m)"
+    assert scan_readout({**s, "bright_beams": 0, "bright_range": None}) == (
+        "scan 7  t = 1.23 s  returns 99  bright beams 0")
+
+
+def test_scan_scrubber_prints_the_readout_the_raw_file_implies(car_park, capsys):
+    # What the browser test reads: the printed line, for each slider position, must say
+    # what the raw file holds for that scan (counted here from the .mat, not via the loader).
+    raw = scipy.io.loadmat(fetch.dataset_dir("car_park") / "data_set.mat")
+    t_raw = raw["TimeLaser"].ravel() - car_park.info["time_offset_s"]
+    plt.close("all")
+    w = widgets.scan_scrubber(car_park, start=150)
+    capsys.readouterr()  # the first drawing (scan 150)
+    seen = {}
+    for k in (151, 300):
+        w.children[0].value = k
+        # Outside a kernel stdout also holds clear_output's escape codes and the figure's repr.
+        (printed,) = re.findall(r"scan \d+ .*", capsys.readouterr().out)
+        assert printed == w.holder["readout"] == scan_readout(
+            widgets.scan_summary(car_park.laser, k, max_range=20))
+        m = READOUT.fullmatch(printed)
+        assert m, printed
+        assert int(m[1]) == k
+        assert float(m[2]) == pytest.approx(t_raw[k], abs=0.005)
+        assert int(m[3]) == np.count_nonzero(raw["Laser"][k] < 20)
+        assert int(m[4]) == np.count_nonzero(raw["Intensity"][k] > 0)
+        seen[k] = (float(m[2]), int(m[3]), int(m[4]))
+    # The two scans differ in every number, as the raw file says (tape seen at 151, none at 300).
+    assert seen[151][2] > 0 and seen[300][2] == 0
+    assert seen[151][1] != seen[300][1] and seen[300][0] - seen[151][0] > 30
+    # The plot is drawn outside pyplot: in JupyterLab a kernel subshell thread flushes every
+    # open pyplot figure while the callback runs, which showed half-drawn plots.
+    assert plt.get_fignums() == []
 
 
 def test_scan_scrubber_and_summary_reject_bad_input(victoria_park, car_park):

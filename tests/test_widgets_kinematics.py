@@ -28,6 +28,7 @@ def test_moving_the_steering_slider_changes_the_radius(explorer):
     so it checks R = L / tan(alpha) for the rear axle and, for the laser, the distance
     from the instantaneous centre (0, R) to the laser at (a, b): sqrt(a^2 + (R - b)^2)."""
     a, b, L = ACFR_UTE.a, ACFR_UTE.b, ACFR_UTE.L
+    plt.close("all")
     for alpha in (0.3, 0.5, -0.2, 0.05, -0.55):
         slider(explorer, "steer").value = alpha
         s = explorer.holder["summary"]
@@ -35,6 +36,9 @@ def test_moving_the_steering_slider_changes_the_radius(explorer):
         assert s["radius_axle"] == pytest.approx(abs(R), abs=1e-9)
         assert s["radius_laser"] == pytest.approx(math.hypot(a, R - b), abs=1e-9)
         assert s["radius_formula"] == pytest.approx(abs(R), abs=1e-12)
+    # The callback draws outside pyplot (plotting.widget_figure): nothing is left open for a
+    # kernel thread's flush_figures to show half drawn.
+    assert plt.get_fignums() == []
 
 
 def test_straight_ahead_has_no_radius_and_no_euler_error(explorer):

@@ -48,10 +48,14 @@ def test_summary_reference_residuals_agree_with_the_whole_run_check(car_park):
 def test_scrubber_follows_its_sliders(car_park):
     w = wl.beacon_scrubber(car_park, start=150)
     assert w.holder["summary"]["scan"] == 150
+    plt.close("all")
     w.children[0].value = 68                  # a close pole with ordinary beams inside its tape
     merged = w.holder["summary"]["beacons"]
     w.children[1].value = 0                   # strictly contiguous clusters split it
     assert w.holder["summary"]["beacons"] > merged
+    # The callback draws outside pyplot (plotting.widget_figure): nothing is left open for a
+    # kernel thread's flush_figures to show half drawn.
+    assert plt.get_fignums() == []
     assert w.children[0].max == len(car_park.laser) - 1
 
 

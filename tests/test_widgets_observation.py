@@ -87,8 +87,12 @@ def test_explorer_summary_follows_the_sliders():
     np.testing.assert_allclose(s0["mc_sd_ratio"], 1.0, atol=0.05)
     sl = sliders(w)
 
+    plt.close("all")
     sl["landmark x"].value = 30.0          # farther: range grows, bearing spread shrinks
     s1 = w.holder["summary"]
+    # The callback draws outside pyplot (plotting.widget_figure): nothing is left open for a
+    # kernel thread's flush_figures to show half drawn.
+    assert plt.get_fignums() == []
     assert s1["range"] == pytest.approx(30.0)
     assert s1["sigma_bearing"] < s0["sigma_bearing"]
     assert s1["sigma_range"] == pytest.approx(s0["sigma_range"], rel=1e-12)

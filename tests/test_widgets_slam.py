@@ -92,7 +92,11 @@ def test_explorer_follows_its_sliders(car_park, full_run):
     assert first["t_end"] <= 40.0 and first["scans"] == np.count_nonzero(car_park.laser.t <= 40.0)
     assert first["landmarks"] == first["matched"] < 15          # not all beacons seen yet
     # sigma_range: the same numbers as the pure function with that configuration
+    plt.close("all")
     rng.value = 0.05
+    # The picture is rendered on a Figure outside pyplot (an Image widget): nothing is left
+    # open for a kernel thread's flush_figures to show half drawn.
+    assert plt.get_fignums() == []
     base = ws.fixed_initial_pose(car_park, SlamConfig.for_dataset("car_park"))
     ref = ws.slam_summary(car_park, base.replace(sigma_range=0.05), t_end=40.0)
     assert w.holder["summary"]["nis_per_dof"] == ref["nis_per_dof"] != first["nis_per_dof"]

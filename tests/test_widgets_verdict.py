@@ -74,7 +74,11 @@ def test_slider_moves_the_summary_and_the_picture(sweep):
     assert slider.continuous_update is False
     assert w.holder["summary"] is sweep[1.0]
     png1 = w.children[1].value
+    plt.close("all")
     slider.value = 0.3
+    # The picture is rendered on a Figure outside pyplot (an Image widget): nothing is left
+    # open for a kernel thread's flush_figures to show half drawn.
+    assert plt.get_fignums() == []
     s = w.holder["summary"]
     assert s["scale"] == 0.3 and s["pose_trace"] < 0.7 * sweep[1.0]["pose_trace"]
     assert "R × 0.3" in w.holder["text"] and f"{s['pose_trace']:.4f}" in w.holder["text"]

@@ -142,7 +142,11 @@ def test_scrubber_follows_the_slider(sim_run):
     assert w.children[0].max == int(np.floor(r.trajectory[-1, 0]))
     assert not w.children[0].continuous_update          # one redraw per release, not per pixel
     first = w.holder["summary"]
+    plt.close("all")
     w.children[0].value = 25
+    # The callback draws outside pyplot (plotting.widget_figure): nothing is left open for a
+    # kernel thread's flush_figures to show half drawn.
+    assert plt.get_fignums() == []
     s = w.holder["summary"]
     assert s["t"] == 25.0 and s["fix"] is None
     row = np.searchsorted(r.trajectory[:, 0], 25.0, side="right") - 1

@@ -20,6 +20,7 @@ from ipywidgets import SelectionSlider, interactive
 
 from .. import ann
 from ..ann_plots import plot_performance
+from ..plotting import show_widget_figure, widget_figure
 
 __all__ = ["HiddenSizeGrid", "hidden_size_grid", "grid_summary", "plot_hidden_grid",
            "hidden_size_explorer"]
@@ -153,13 +154,13 @@ def hidden_size_explorer(grid: HiddenSizeGrid, *, hidden: int | None = None, see
 
     def draw(hidden: int, seed: int) -> None:
         holder["summary"] = s = grid_summary(grid, hidden, seed)
-        fig, (a0, a1) = plt.subplots(1, 2, figsize=(12, 4.2))
+        fig, (a0, a1) = widget_figure(1, 2, figsize=(12, 4.2))  # not pyplot: see widget_figure
         plot_performance(grid.models[(hidden, seed)], ax=a0)
         plot_hidden_grid(grid, ax=a1, hidden=hidden, seed=seed)
         a1.set_title(f"{hidden} neurons, seed {seed}: test {s['chrono_rmse']:.3f} m, "
                      f"unseen beacons {s['lbo_rmse']:.3f} m", fontsize=10)
         fig.tight_layout()
-        plt.show()
+        show_widget_figure(fig)
 
     widget = interactive(
         draw,

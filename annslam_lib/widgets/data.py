@@ -1,11 +1,10 @@
 """Chapter 00 explorers: scrubbing through the raw laser scans of a run."""
 from __future__ import annotations
 
-import matplotlib.pyplot as plt
 import numpy as np
 from ipywidgets import IntSlider, interactive
 
-from ..plotting import plot_scan_vehicle_frame
+from ..plotting import plot_scan_vehicle_frame, show_widget_figure, widget_figure
 from ..records import Dataset, Laser
 
 
@@ -25,17 +24,32 @@ def scan_summary(laser: Laser, k: int, *, max_range: float = 30.0) -> dict:
     }
 
 
+def scan_readout(summary: dict) -> str:
+    """One line of text for a :func:`scan_summary`, printed under the scrubber's slider
+    (so a reader, or a browser test, can read what the current scan holds)."""
+    line = (f"scan {summary['scan']}  t = {summary['t']:.2f} s  returns {summary['returns']}  "
+            f"bright beams {summary['bright_beams']}")
+    if summary["bright_range"] is not None:
+        line += f" ({summary['bright_range'][0]:.2f}-{summary['bright_range'][1]:.2f} m)"
+    return line
+
+
 def scan_scrubber(ds: Dataset, *, max_range: float = 20.0, start: int = 0):
-    """A time slider over the raw laser scans of ``ds`` drawing each in the vehicle frame."""
+    """A time slider over the raw laser scans of ``ds`` drawing each in the vehicle frame,
+    under a one-line :func:`scan_readout`. The latest summary is in ``widget.holder["summary"]``,
+    its readout in ``holder["readout"]``."""
     if ds.laser is None:
         raise ValueError(f"dataset {ds.name!r} has no raw laser scans to scrub through")
     holder = {}
 
     def draw(k: int) -> None:
-        holder["summary"] = scan_summary(ds.laser, k, max_range=max_range)
-        _, ax = plt.subplots(figsize=(7, 5))
+        holder["summary"] = s = scan_summary(ds.laser, k, max_range=max_range)
+        holder["readout"] = scan_readout(s)
+        print(holder["readout"])
+        # Not pyplot: a kernel subshell thread may flush pyplot figures mid-draw (widget_figure).
+        fig, ax = widget_figure(figsize=(7, 5))
         plot_scan_vehicle_frame(ds.laser, k, ds.vehicle, ax=ax, max_range=max_range)
-        plt.show()
+        show_widget_figure(fig)
 
     slider = IntSlider(value=start, min=0, max=len(ds.laser) - 1, step=1,
                        description="scan", continuous_update=False)

@@ -15,7 +15,7 @@ from ipywidgets import FloatSlider, interactive
 
 from ..kinematics import axle_pose, predict, predict_exact
 from ..metrics import TrajectoryErrors
-from ..plotting import car_outline
+from ..plotting import car_outline, show_widget_figure, widget_figure
 from ..vehicle import ACFR_UTE, Vehicle
 
 __all__ = ["circumradius", "arc_vs_euler", "plot_arc_vs_euler", "kinematics_explorer",
@@ -104,11 +104,12 @@ def kinematics_explorer(vehicle: Vehicle = ACFR_UTE, *, speed: float = 2.0,
     def draw(speed: float, steering: float, dt: float) -> None:
         s = arc_vs_euler(speed, steering, dt, vehicle, horizon=horizon)
         holder["summary"] = s
-        ax = plot_arc_vs_euler(s)
+        fig, ax = widget_figure(figsize=(6, 6))  # not pyplot: see widget_figure
+        plot_arc_vs_euler(s, ax)
         r = s["radius_axle"]
         ax.set_title(f"rear-axle radius {r:.2f} m (L / tan(alpha) = {s['radius_formula']:.2f} m)"
                      if math.isfinite(r) else "straight ahead: infinite radius", fontsize=10)
-        plt.show()
+        show_widget_figure(fig)
 
     sliders = dict(
         speed=FloatSlider(value=speed, min=0.0, max=5.0, step=0.1, description="speed [m/s]",

@@ -20,6 +20,7 @@ from ..association import NEW, REJECTED, associate, gate_threshold, mahalanobis
 from ..features import BeaconConfig, beacon_config_for, beacons_from_scan, gps_scan_poses
 from ..geometry import wrap_angle
 from ..observation import observe
+from ..plotting import show_widget_figure, widget_figure
 from ..records import Dataset
 from ..uncertainty import ellipse_points
 
@@ -131,8 +132,9 @@ def beacon_scrubber(ds: Dataset, *, config: BeaconConfig | None = None, start: i
             if np.isfinite(dr))
         print(f"scan {k}: {s['beacons']} beacons at "
               + ", ".join(f"({r:.2f} m, {math.degrees(b):.1f} deg)" for r, b in s["z"]) + res)
-        draw_beacon_scan(ds, s, max_range=max_range)
-        plt.show()
+        fig, ax = widget_figure(figsize=(7, 5))  # not pyplot: see widget_figure
+        draw_beacon_scan(ds, s, ax, max_range=max_range)
+        show_widget_figure(fig)
 
     widget = interactive(
         draw,
@@ -213,10 +215,10 @@ def gate_explorer(*, prob: float = 0.99, new_prob: float = 0.9999):
         holder["summary"] = {"prob": prob, "gate": g, "d2": d2, "assign": a}
         print(f"gate {100 * prob:g} %: d2 <= {g:.2f}; assignment {a.tolist()} "
               "(-1 new, -2 rejected)")
-        _, ax = plt.subplots(figsize=(7, 5))
+        fig, ax = widget_figure(figsize=(7, 5))  # not pyplot: see widget_figure
         draw_gates(ax, scene["zhat"], scene["S"], scene["z"], a, gate=g,
                    title=f"{100 * prob:g} % gates")
-        plt.show()
+        show_widget_figure(fig)
 
     options = [0.5, 0.9, 0.95, 0.99, 0.999, 0.9999, 0.999999]
     if prob not in options:

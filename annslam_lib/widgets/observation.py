@@ -18,6 +18,7 @@ from ipywidgets import FloatSlider, interactive
 
 from ..geometry import wrap_angle
 from ..observation import observe
+from ..plotting import show_widget_figure, widget_figure
 from ..uncertainty import coverage, draw_ellipse, expected_coverage, monte_carlo, propagate
 
 #: The laser pose of the explorer: origin, heading East.
@@ -25,6 +26,8 @@ POSE = np.array([0.0, 0.0, 0.0])
 #: Laser noise of the Car Park program (as simulate.SimConfig): 0.1 m, 1 degree.
 SIGMA_RANGE = 0.1
 SIGMA_BEARING = math.radians(1.0)
+#: Size of the two panels of :func:`draw_prediction`.
+PREDICTION_FIGSIZE = (11, 4.5)
 
 
 def _nonneg(name: str, value) -> float:
@@ -78,13 +81,14 @@ def _sample_measurements(summary: dict, n: int, seed: int):
     return z + noise
 
 
-def draw_prediction(summary: dict, *, n_samples: int = 2000, seed: int = 3):
+def draw_prediction(summary: dict, *, n_samples: int = 2000, seed: int = 3, axes=None):
     """Two panels: the scene (pose, its 2-sigma position ellipse and heading fan, the
     landmark and its ellipse) and measurement space (bearing in degrees, range) with
     a Monte-Carlo cloud of the true h and the linearised 2-sigma ellipse of S.
     Adds to ``summary``: ``mc_coverage``, the fraction of the cloud inside that ellipse,
     and ``mc_sd_ratio``, the cloud's (range, bearing) standard deviations divided by the
-    linearised ones (1 where the linearisation is honest)."""
+    linearised ones (1 where the linearisation is honest). ``axes``: the two axes to draw
+    on (default: a new pyplot figure). Returns the Figure."""
     pose, lm = summary["pose"], summary["landmark"]
     z_mc = _sample_measurements(summary, n_samples, seed)
     summary["mc_coverage"] = coverage(z_mc, summary["z"], summary["S"], 2.0, angle_columns=[1])
@@ -92,7 +96,10 @@ def draw_prediction(summary: dict, *, n_samples: int = 2000, seed: int = 3):
     err[:, 1] = wrap_angle(err[:, 1])
     lin_sd = np.sqrt(np.diag(summary["S"]))
     summary["mc_sd_ratio"] = np.std(err, axis=0, ddof=1) / np.where(lin_sd > 0, lin_sd, np.nan)
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.5))
+    if axes is None:
+        _, axes = plt.subplots(1, 2, figsize=PREDICTION_FIGSIZE)
+    a1, a2 = axes
+    fig = a1.figure
     P = summary["P"]
     a1.plot(*pose[:2], "k^", ms=9, label="laser (mean pose)")
     if P[0, 0] > 0:
@@ -145,14 +152,15 @@ def measurement_explorer(*, landmark=(10.0, 3.0), sigma_xy: float = 0.3,
             holder["summary"] = {"error": str(exc)}
             print(f"cannot predict: {exc}")
             return
-        draw_prediction(s, n_samples=n_samples)
+        fig, axes = widget_figure(1, 2, figsize=PREDICTION_FIGSIZE)  # not pyplot: see widget_figure
+        draw_prediction(s, n_samples=n_samples, axes=axes)
         holder["summary"] = s
         print(f"z = (range {s['range']:.2f} m, bearing {math.degrees(s['bearing']):.1f} deg); "
               f"sigma_range {s['sigma_range']:.3f} m, sigma_bearing "
               f"{math.degrees(s['sigma_bearing']):.2f} deg, correlation {s['correlation']:+.2f}; "
               f"Monte Carlo: sd ratios {s['mc_sd_ratio'][0]:.2f} (range), "
               f"{s['mc_sd_ratio'][1]:.2f} (bearing), {100 * s['mc_coverage']:.1f}% inside 2σ")
-        plt.show()
+        show_widget_figure(fig)
 
     slider = dict(continuous_update=False, readout_format=".1f")
     widget = interactive(

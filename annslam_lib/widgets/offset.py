@@ -21,7 +21,7 @@ from .. import kinematics
 from ..dead_reckoning import dead_reckon
 from ..geometry import rot
 from ..metrics import interpolate_poses
-from ..plotting import car_outline
+from ..plotting import car_outline, show_widget_figure, widget_figure
 from ..records import Dataset, Odometry
 from ..vehicle import Vehicle
 
@@ -30,6 +30,8 @@ __all__ = ["Stretch", "car_park_stretch", "offset_paths", "offset_summary", "bes
 
 #: A right turn of about 200 degrees at full lock, entered from a near-straight (seconds).
 TURN = (6.0, 21.0)
+#: Layout of the two panels of :func:`plot_offset_stretch`.
+STRETCH_LAYOUT = dict(figsize=(11, 4.8), gridspec_kw={"width_ratios": [1.1, 1]})
 
 
 @dataclass(frozen=True)
@@ -183,15 +185,20 @@ def plot_offset_geometry(vehicle: Vehicle, phi: float = np.radians(30.0), ax=Non
     return ax
 
 
-def plot_offset_stretch(stretch: Stretch, a: float, b: float, *, align: bool = True) -> dict:
+def plot_offset_stretch(stretch: Stretch, a: float, b: float, *, align: bool = True,
+                        axes=None) -> dict:
     """Two panels: the axle path, the laser path for offset (a, b) and GPS on the map
     (purple: the lever arm at six instants); the laser path's distance to GPS over time,
-    with the best-fitting offset in the title. Returns the :func:`offset_summary`."""
+    with the best-fitting offset in the title. ``axes``: the two axes to draw on (default: a
+    new pyplot figure). Returns the :func:`offset_summary`."""
     s = offset_summary(stretch, a, b, align=align)
     p = offset_paths(stretch, a, b, align=align)
     best = best_offset(stretch, align=align)
     best_rms = offset_summary(stretch, *best, align=align)["rms"]
-    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 4.8), gridspec_kw={"width_ratios": [1.1, 1]})
+    if axes is None:
+        _, axes = plt.subplots(1, 2, **STRETCH_LAYOUT)
+    ax, ax2 = axes
+    fig = ax.figure
     ax.plot(p["axle"][:, 0], p["axle"][:, 1], "-", color="0.4", label="rear axle (dead reckoning)")
     ax.plot(p["laser"][:, 0], p["laser"][:, 1], "-", color="tab:red",
             label=f"laser for a = {a:.2f}, b = {b:.2f}")
@@ -248,13 +255,14 @@ def offset_explorer(ds: Dataset, t0: float = TURN[0], t1: float = TURN[1]):
     holder = {"stretch": stretch}
 
     def draw(a: float, b: float, align: bool) -> None:
-        s = plot_offset_stretch(stretch, a, b, align=align)
+        fig, axes = widget_figure(1, 2, **STRETCH_LAYOUT)  # not pyplot: see widget_figure
+        s = plot_offset_stretch(stretch, a, b, align=align, axes=axes)
         holder["summary"] = s
         holder["paths"] = offset_paths(stretch, a, b, align=align)
         print(f"a = {a:.2f} m, b = {b:.2f} m: laser path to GPS RMS {s['rms']:.3f} m, "
               f"max {s['max']:.3f} m over {s['fixes']} fixes; heading correction "
               f"{s['heading_correction_deg']:.2f} deg")
-        plt.show()
+        show_widget_figure(fig)
 
     v = ds.vehicle
     widget = interactive(

@@ -20,6 +20,7 @@ from matplotlib.collections import LineCollection
 
 from ..ekf_slam import SlamResult
 from ..metrics import TrajectoryErrors, trajectory_errors
+from ..plotting import show_widget_figure, widget_figure
 from ..records import Gps
 
 __all__ = ["gps_outliers", "landmark_first_seen", "ellipse_curves", "run_snapshot", "draw_run",
@@ -233,11 +234,11 @@ def run_scrubber(result: SlamResult, gps: Gps, *, start: float | None = None, st
                if s["fix"] is None else f"error vs GPS {s['fix']['error']:.2f} m")
         print(f"t = {t} s, scan {s['scan']}: {s['landmarks']} landmarks mapped, position "
               f"sigma {s['sigma_xy']:.2f} m; {fix}")
-        fig, (a1, a2) = plt.subplots(2, 1, figsize=(8, 9), gridspec_kw={"height_ratios": [3, 1]})
+        fig, (a1, a2) = widget_figure(2, 1, figsize=(8, 9), gridspec_kw={"height_ratios": [3, 1]})
         draw_run(result, gps, float(t), a1, first_seen=first_seen, outliers=outliers)
         draw_gps_errors(errors, a2, t=float(t), outliers=err_outliers)
         fig.tight_layout()
-        plt.show()
+        show_widget_figure(fig)  # not pyplot: see widget_figure
 
     slider = IntSlider(value=start, min=lo, max=hi, step=step, description="t [s]",
                        continuous_update=False)
