@@ -274,13 +274,6 @@ class NotebookGrade:
         return "\n".join(lines)
 
 
-def _error_of(cell) -> str:
-    for out in cell.get("outputs", []):
-        if out.get("output_type") == "error":
-            return f"{out.get('ename', 'Error')}: {out.get('evalue', '')}"
-    return ""
-
-
 def restore_tests(nb, instructor) -> int:
     """Put the instructor's autograded cells (hidden tests included) back into a submission,
     matched by grade id, as nbgrader's autograde does: a student cannot edit a test into
@@ -298,6 +291,43 @@ def restore_tests(nb, instructor) -> int:
     return n
 
 
+def _run_cells(nb, cwd: Path, *, timeout: int, kernel_name: str) -> dict[int, str]:
+    """Execute every code cell of ``nb`` on one fresh kernel, in order, errors allowed;
+    return {cell index: 'Name: message'} for the cells that raised.
+
+    Plain jupyter_client (``execute_interactive`` waits for the reply and for the kernel to
+    go idle), as nbval does: nbclient's widget-message handling sometimes sat idle for
+    minutes after an ``interactive`` widget cell here. A cell over ``timeout`` seconds is
+    interrupted and reported as an error."""
+    from jupyter_client.manager import start_new_kernel
+
+    km, kc = start_new_kernel(kernel_name=kernel_name, cwd=str(cwd), startup_timeout=120)
+    errors: dict[int, str] = {}
+    try:
+        for i, cell in enumerate(nb.cells):
+            if cell.cell_type != "code" or not cell.source.strip():
+                continue
+            seen: list[str] = []
+
+            def hook(msg, seen=seen):
+                if msg["msg_type"] == "error":
+                    seen.append(f"{msg['content']['ename']}: {msg['content']['evalue']}")
+            try:
+                reply = kc.execute_interactive(cell.source, timeout=timeout, output_hook=hook,
+                                               allow_stdin=False, store_history=True)
+            except TimeoutError:
+                km.interrupt_kernel()
+                errors[i] = f"TimeoutError: the cell did not finish in {timeout} s"
+                continue
+            content = reply["content"]
+            if content.get("status") == "error":
+                errors[i] = seen[0] if seen else f"{content.get('ename')}: {content.get('evalue')}"
+    finally:
+        kc.stop_channels()
+        km.shutdown_kernel(now=True)
+    return errors
+
+
 def grade(path, *, instructor=None, timeout: int = 600,
           kernel_name: str = "python3") -> NotebookGrade:
     """Execute the notebook at ``path`` on a fresh kernel (its folder as working directory,
@@ -306,22 +336,14 @@ def grade(path, *, instructor=None, timeout: int = 600,
     notebook's path), its test cells, hidden tests included, replace the submission's first
     (:func:`restore_tests`). Errors in other cells are listed separately: in a student
     version they mean the notebook depends on a student's answer outside the exercises."""
-    from nbclient import NotebookClient
-
     path = Path(path).resolve()
     nb = nbformat.read(path, as_version=4)
     found = validate(nb, path.name, instructor=False)
     if instructor is not None:
         restore_tests(nb, nbformat.read(Path(instructor), as_version=4))
-    NotebookClient(nb, timeout=timeout, kernel_name=kernel_name, allow_errors=True,
-                   record_timing=False,
-                   resources={"metadata": {"path": str(path.parent)}}).execute()
+    errors = _run_cells(nb, path.parent, timeout=timeout, kernel_name=kernel_name)
     graded = {ex.cell for ex in found}
-    results = []
-    for ex in found:
-        err = _error_of(nb.cells[ex.cell])
-        results.append(GradeResult(ex.grade_id, 0.0 if err else ex.points, ex.points, ex.cell,
-                                   err))
-    others = [(i, _error_of(c)) for i, c in enumerate(nb.cells)
-              if c.cell_type == "code" and i not in graded and _error_of(c)]
+    results = [GradeResult(ex.grade_id, 0.0 if ex.cell in errors else ex.points, ex.points,
+                           ex.cell, errors.get(ex.cell, "")) for ex in found]
+    others = [(i, err) for i, err in sorted(errors.items()) if i not in graded]
     return NotebookGrade(path.name, results, others)
