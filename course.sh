@@ -36,7 +36,7 @@ setup() {  # setup [extra requirement files...]
         stamp="$VENV/.annslam-installed-${req%.txt}"
         want=$("$VPY" -c 'import hashlib,sys; print(hashlib.sha256(b"".join(open(f,"rb").read() for f in sys.argv[1:])).hexdigest())' pyproject.toml "$req")
         if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
-            echo "== installing $req into $VENV (torch is the CPU build)"
+            echo "== installing $req into $VENV"
             "$VPY" -m pip install --disable-pip-version-check -q -r "$req"
             echo "$want" > "$stamp"
         fi
