@@ -1,23 +1,27 @@
 #!/usr/bin/env bash
 # annslam course: one entry point for students, instructors and CI.
 #
-#   ./course.sh lab       set up (venv, packages, data) and open JupyterLab on the course
-#   ./course.sh test      set up and run the whole test suite (unit tests + every notebook, strict nbval)
-#   ./course.sh refresh   re-execute every notebook in place (or the ones named after it)
-#   ./course.sh release   write the student versions (no solutions, no hidden tests) into ./student
-#   ./course.sh grade NB  run notebooks and score their autograded exercises
-#   ./course.sh setup     only set up
+#   ./course.sh lab [--instructor]  set up, then open JupyterLab on YOUR copy of the course
+#                                   (student versions in work/<user>/; --instructor: notebooks/)
+#   ./course.sh test                set up and run the whole test suite
+#   ./course.sh setup               only set up (venv, CPU torch, packages, data)
+#   ./course.sh refresh [NB...]     re-execute notebooks in place (instructors)
+#   ./course.sh release [...]       write the student versions (no solutions, no hidden tests)
+#   ./course.sh grade SUB...        grade submitted notebooks (instructors)
 #
-# `test` also installs environment-instructor.txt (nbgrader, playwright for the browser test).
+# `test` also installs environment-instructor.txt (nbgrader, playwright, ...).
 #
-# Environment: PYTHON (interpreter for the venv, default python3, must be >= 3.11),
-# ANNSLAM_VENV (venv folder, default .venv), ANNSLAM_DATA (data folder; default: per-user cache).
+# Environment: PYTHON (interpreter for the venv, default python3: 3.11, 3.12 or 3.13),
+# ANNSLAM_VENV (venv folder, default .venv), ANNSLAM_DATA (data folder; default: per-user
+# cache), ANNSLAM_TORCH_INDEX (PyTorch CPU wheel index; default PyTorch's own),
+# ANNSLAM_WORK (the student's working folder; default work/<user>).
 set -euo pipefail
 cd "$(dirname "$0")"
 
 PY=${PYTHON:-python3}
 VENV=${ANNSLAM_VENV:-.venv}
 VPY="$VENV/bin/python"
+export ANNSLAM_VENV="$VENV"
 
 # Fixed BLAS threads: last digits of floats depend on the thread count, and the
 # stored notebook outputs are compared digit for digit.
@@ -25,37 +29,41 @@ export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 PYTHONHASHSEED
 
 setup() {  # setup [extra requirement files...]
     local t0=$SECONDS
-    "$PY" -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else 1)' || {
-        echo "annslam needs Python >= 3.11; $("$PY" --version 2>&1) found. Set PYTHON=/path/to/python3.11." >&2
+    command -v "$PY" >/dev/null 2>&1 || {
+        echo "annslam: no Python interpreter '$PY'. Install Python 3.11 and run: PYTHON=/path/to/python3.11 ./course.sh setup" >&2
         exit 1
     }
-    [ -x "$VPY" ] || "$PY" -m venv "$VENV"
-    # Install each requirements file only when it (or pyproject.toml) changed: a stamp of its hash.
-    local req want stamp
-    for req in environment.txt "$@"; do
-        stamp="$VENV/.annslam-installed-${req%.txt}"
-        want=$("$VPY" -c 'import hashlib,sys; print(hashlib.sha256(b"".join(open(f,"rb").read() for f in sys.argv[1:])).hexdigest())' pyproject.toml "$req")
-        if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
-            echo "== installing $req into $VENV"
-            "$VPY" -m pip install --disable-pip-version-check -q -r "$req"
-            echo "$want" > "$stamp"
-        fi
-    done
-    "$VPY" scripts/check_env.py
+    "$PY" scripts/install.py --venv "$VENV" "$@"
+    echo "== data: checking (and on first use downloading) the course's datasets"
     "$VPY" -m annslam_lib data fetch
     echo "== set-up done in $((SECONDS - t0)) s"
+}
+
+lab() {
+    local root instructor=0 args=()
+    for a in "$@"; do
+        if [ "$a" = "--instructor" ]; then instructor=1; else args+=("$a"); fi
+    done
+    setup
+    if [ "$instructor" = 1 ]; then
+        root="$PWD/notebooks"
+    else
+        root=$("$VPY" -m annslam_lib workspace)   # writes what is new, prints the folder
+    fi
+    # One course server per folder: a second `lab` says where the first one is.
+    if "$VPY" -m annslam_lib running --root "$root"; then
+        exit 0
+    fi
+    [ "$(id -u)" = 0 ] && args+=(--allow-root)  # containers often run as root; Jupyter refuses without it
+    echo "== opening JupyterLab on $root"
+    exec "$VENV/bin/jupyter" lab --ServerApp.root_dir="$root" "${args[@]}" "$root/00_course_map.ipynb"
 }
 
 cmd=${1:-lab}
 [ $# -gt 0 ] && shift
 case "$cmd" in
     setup) setup ;;
-    lab)
-        setup
-        extra=()
-        [ "$(id -u)" = 0 ] && extra+=(--allow-root)  # containers often run as root; Jupyter refuses without it
-        exec "$VENV/bin/jupyter" lab --ServerApp.root_dir=notebooks "${extra[@]}" "$@" "$PWD/notebooks/00_course_map.ipynb"
-        ;;
+    lab) lab "$@" ;;
     test)
         setup environment-instructor.txt
         t0=$SECONDS
@@ -76,7 +84,7 @@ case "$cmd" in
         "$VPY" -m annslam_lib grade "$@"
         ;;
     *)
-        echo "usage: ./course.sh [lab|test|refresh|release|grade|setup]" >&2
+        echo "usage: ./course.sh [lab [--instructor]|test|setup|refresh|release|grade]" >&2
         exit 2
         ;;
 esac

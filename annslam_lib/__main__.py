@@ -9,6 +9,8 @@
     python -m annslam_lib release [--out student] [NOTEBOOK ...]   student versions (no solutions)
     python -m annslam_lib grade NOTEBOOK ... [--json FILE]          run and score autograded cells
     python -m annslam_lib exercises                                the graded exercises per notebook
+    python -m annslam_lib workspace                                write/refresh your student copy
+    python -m annslam_lib running --root DIR                       is a course server open on DIR?
 
 Each command is a sub-parser added by an ``_add_<command>`` function that sets ``func``;
 ``main`` returns the exit code.
@@ -214,6 +216,49 @@ def _add_exercises(sub) -> None:
     p.set_defaults(func=_exercises)
 
 
+def _workspace(args: argparse.Namespace) -> int:
+    from .workspace import sync, work_dir
+
+    try:
+        report = sync(args.dir or work_dir())
+    except ValueError as e:
+        print(f"workspace: {e}", file=sys.stderr)
+        return 2
+    print(f"== {report.summary()}", file=sys.stderr)
+    for name in report.kept:
+        print(f"   {name}: you have changed it, so it is left as it is (the course's current "
+              f"version: ./course.sh release --out DIR notebooks/{name})", file=sys.stderr)
+    print(report.folder)
+    return 0
+
+
+def _add_workspace(sub) -> None:
+    p = sub.add_parser("workspace", help="write the student versions into your own course "
+                       "folder (new chapters added; notebooks you changed are never overwritten)")
+    p.add_argument("--dir", metavar="DIR", help="the folder (default $ANNSLAM_WORK, else "
+                   "work/<user> in the course checkout)")
+    p.set_defaults(func=_workspace)
+
+
+def _running(args: argparse.Namespace) -> int:
+    from .workspace import running_servers
+
+    servers = running_servers(args.root)
+    for s in servers:
+        token = f"?token={s['token']}" if s.get("token") else ""
+        print(f"== the course is already open on {args.root}: {s['url'].rstrip('/')}/lab{token} "
+              f"(server pid {s.get('pid')}); open that address, or stop that server first "
+              f"(Ctrl-C in its terminal, or kill {s.get('pid')})")
+    return 0 if servers else 1
+
+
+def _add_running(sub) -> None:
+    p = sub.add_parser("running", help="exit 0 and print the address if a Jupyter server of "
+                       "this user already serves DIR, else exit 1")
+    p.add_argument("--root", required=True, metavar="DIR")
+    p.set_defaults(func=_running)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m annslam_lib",
                                      description="annslam course library: data and tools.")
@@ -224,6 +269,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_release(sub)
     _add_grade(sub)
     _add_exercises(sub)
+    _add_workspace(sub)
+    _add_running(sub)
     return parser
 
 

@@ -108,7 +108,8 @@ _FORMAT = "annslam-ann-v1"
 
 def _need_torch() -> None:
     if torch is None:
-        raise ImportError("annslam_lib.ann needs PyTorch: pip install 'annslam[ann]' (or torch)")
+        raise ImportError("annslam_lib.ann needs PyTorch, the CPU build: run ./course.sh setup in "
+                          "the course folder (it installs torch 2.13.0+cpu)")
 
 
 # --------------------------------------------------------------------------- training set

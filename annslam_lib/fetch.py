@@ -18,6 +18,8 @@ import errno
 import hashlib
 import http.client
 import os
+import shlex
+import sys
 import tempfile
 import urllib.request
 from pathlib import Path
@@ -97,11 +99,17 @@ def _error(entry: DatasetEntry, f: DataFile, folder: Path, problem: str, got: st
         lines.append(f"  got sha256:      {got}")
     lines += [
         f"  searched:        {folder}  (data directory from {where})",
-        f"Fix: run  python -m annslam_lib data fetch {entry.name}  (needs internet; downloads and "
-        "verifies it),",
+        f"Fix: run  {fetch_command(entry.name)}  (needs internet; downloads and verifies it;",
+        "     ./course.sh setup in the course folder does the same for every dataset),",
         f"     or set {ENV_DIR} to a writable directory, or to one holding {entry.folder}/{f.name}.",
     ]
     return DataError("\n".join(lines))
+
+
+def fetch_command(name: str) -> str:
+    """The command that downloads dataset ``name``, as it works when pasted: the interpreter
+    running this library (the course's venv python), not a bare ``python``."""
+    return f"{shlex.quote(sys.executable)} -m annslam_lib data fetch {name}"
 
 
 def _sha256(p: Path) -> str:

@@ -9,14 +9,21 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _pins(name: str = "environment.txt") -> dict[str, str]:
+    """{package: pinned version} for this platform (lines whose marker does not apply to it,
+    e.g. macOS's torch on Linux, are left out)."""
+    from packaging.requirements import Requirement
+
     pins = {}
     for raw in (ROOT / name).read_text().splitlines():
         line = raw.split("#", 1)[0].strip()
         if not line or line == "-e .":
             continue
-        m = re.fullmatch(r"([A-Za-z0-9_.\-]+)==([0-9][A-Za-z0-9.+\-]*)", line)
+        req = Requirement(line)
+        spec = str(req.specifier)
+        m = re.fullmatch(r"==([0-9][A-Za-z0-9.+\-]*)", spec)
         assert m, f"{name}: {raw!r} is not pinned to an exact version"
-        pins[m.group(1).lower()] = m.group(2)
+        if req.marker is None or req.marker.evaluate():
+            pins[req.name.lower()] = m.group(1)
     return pins
 
 
@@ -27,7 +34,7 @@ def test_every_requirement_is_pinned_and_installed_at_that_version():
         assert required in pins, f"{required} missing from environment.txt"
     for name, version in pins.items():
         installed = metadata.version(name)
-        assert installed.split("+")[0] == version, f"{name}: pinned {version}, installed {installed}"
+        assert installed == version, f"{name}: pinned {version}, installed {installed}"
 
 
 def test_instructor_extras_are_pinned_and_if_installed_at_that_version():
@@ -39,6 +46,13 @@ def test_instructor_extras_are_pinned_and_if_installed_at_that_version():
         except metadata.PackageNotFoundError:
             continue  # optional: a lab venv without them is fine (their tests skip and say so)
         assert installed == version, f"{name}: pinned {version}, installed {installed}"
+
+
+def test_linux_pins_the_cpu_build_and_macos_the_pypi_wheel():
+    lines = (ROOT / "environment.txt").read_text().splitlines()
+    assert 'torch==2.13.0+cpu; sys_platform == "linux"' in lines
+    assert 'torch==2.13.0; sys_platform == "darwin"' in lines
+    assert not [x for x in lines if x.startswith("torch") and "sys_platform" not in x]
 
 
 def test_torch_is_the_cpu_build_without_cuda_packages():
