@@ -7,7 +7,7 @@
     python -m annslam_lib errata                   the paper's errata as a Markdown table
     python -m annslam_lib reproduce --out DIR [--fast] [--seeds N]   the paper's figures 5-8 and results table
     python -m annslam_lib release [--out student] [NOTEBOOK ...]   student versions (no solutions)
-    python -m annslam_lib grade NOTEBOOK ... [--json FILE]          run and score autograded cells
+    python -m annslam_lib grade SUBMISSION ... [--json FILE]        grade submissions (sandboxed)
     python -m annslam_lib exercises                                the graded exercises per notebook
     python -m annslam_lib workspace                                write/refresh your student copy
     python -m annslam_lib running --root DIR                       is a course server open on DIR?
@@ -152,54 +152,65 @@ def _add_release(sub) -> None:
 
 
 def _grade(args: argparse.Namespace) -> int:
-    import json
+    from .course.grader import grade_batch
+    from .course.sandbox import Limits
 
-    from .release import ReleaseError, grade
+    limits = Limits(cpu_seconds=int(args.cpu), memory_bytes=int(args.memory * (1 << 30)),
+                    cell_timeout=float(args.timeout), call_timeout=float(args.call_timeout),
+                    deadline=float(args.deadline))
+    results = grade_batch(args.submissions, instructor_dir=args.instructor, json_path=args.json,
+                          limits=limits, isolation=args.isolation)
+    bad = [r for r in results if not r.graded]
+    total = len(results)
+    print(f"graded {total - len(bad)} of {total} submission(s)"
+          + (f"; {len(bad)} could not be graded (reasons above)" if bad else "")
+          + (f"; scores in {args.json}" if args.json else ""))
+    return 1 if bad else 0
 
-    from pathlib import Path
 
-    grades = []
-    for path in args.notebooks:
-        inst = None
-        if not args.no_hidden:
-            inst = Path(args.instructor or Path(__file__).resolve().parents[1] / "notebooks")
-            inst = inst / Path(path).name
-            if not inst.exists():
-                print(f"grade: no instructor notebook {inst} (use --instructor DIR or "
-                      f"--no-hidden)", file=sys.stderr)
-                return 1
-            print(f"hidden tests and test cells restored from {inst}")
-        try:
-            g = grade(path, instructor=inst, timeout=args.timeout)
-        except ReleaseError as e:
-            print(f"grade: {e}", file=sys.stderr)
-            return 1
-        print(g.report())
-        grades.append(g)
-    if args.json:
-        with open(args.json, "w") as f:
-            json.dump([{"notebook": g.notebook, "score": g.score, "max_score": g.max_score,
-                        "exercises": [vars(r) for r in g.results],
-                        "other_errors": g.other_errors} for g in grades], f, indent=1)
-    return 1 if any(g.other_errors for g in grades) else 0
+def _positive_float(text: str) -> float:
+    try:
+        x = float(text)
+    except ValueError:
+        x = 0.0
+    if not x > 0:
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
+    return x
 
 
 def _add_grade(sub) -> None:
-    p = sub.add_parser("grade", help="execute notebooks and score their autograded cells",
-                       description="Restores the instructor's test cells (hidden tests "
-                       "included) by grade id, as nbgrader autograde does, runs each notebook on a "
-                       "fresh kernel (errors allowed) and gives each autograded cell its points "
-                       "if it raised nothing. Exit code 1 if a cell that is not an exercise "
-                       "failed.")
-    p.add_argument("notebooks", nargs="+", metavar="NOTEBOOK")
-    p.add_argument("--json", metavar="FILE", help="also write the scores as JSON")
-    p.add_argument("--instructor", metavar="DIR", help="folder of the instructor notebooks whose "
-                   "test cells (with hidden tests) replace the submission's; default: the "
-                   "course's notebooks/")
-    p.add_argument("--no-hidden", action="store_true",
-                   help="grade the submission's own test cells as they are")
-    p.add_argument("--timeout", type=_positive_int, default=600, metavar="S",
-                   help="per-cell timeout in seconds (default 600)")
+    from .course.sandbox import ISOLATIONS, Limits
+
+    d = Limits()
+    p = sub.add_parser("grade", help="grade submitted notebooks (sandboxed; scores decided "
+                       "outside the student's code)",
+                       description="Each submission is graded against the instructor notebook "
+                       "of the same file name: only its solution cells are taken, run in a "
+                       "sandboxed kernel with limits, and every test cell (hidden tests "
+                       "included) is run by the grader with the student's functions behind "
+                       "proxies. A submission that cannot be graded is reported with its "
+                       "reason and the others go on. Exit code 1 if any could not be graded.")
+    p.add_argument("submissions", nargs="+", metavar="SUBMISSION",
+                   help="notebooks, or folders to search (e.g. an nbgrader submitted/ folder: "
+                        "submitted/<student>/<assignment>/<notebook>.ipynb)")
+    p.add_argument("--json", metavar="FILE", help="write every submission's result as JSON "
+                   "(rewritten after each one)")
+    p.add_argument("--instructor", metavar="DIR", help="folder of the instructor notebooks "
+                   "(default: the course's notebooks/)")
+    p.add_argument("--isolation", choices=ISOLATIONS, default="auto",
+                   help="auto (default): bubblewrap if it works here, else the user nobody "
+                        "when run as root, else none")
+    p.add_argument("--timeout", type=_positive_float, default=d.cell_timeout, metavar="S",
+                   help=f"per-cell time-out (default {d.cell_timeout:g} s)")
+    p.add_argument("--call-timeout", type=_positive_float, default=d.call_timeout, metavar="S",
+                   help=f"per call of a student's function (default {d.call_timeout:g} s)")
+    p.add_argument("--deadline", type=_positive_float, default=d.deadline, metavar="S",
+                   help=f"wall-clock deadline per notebook (default {d.deadline:g} s)")
+    p.add_argument("--cpu", type=_positive_float, default=d.cpu_seconds, metavar="S",
+                   help=f"CPU seconds per kernel (default {d.cpu_seconds})")
+    p.add_argument("--memory", type=_positive_float, default=d.memory_bytes / (1 << 30),
+                   metavar="GB", help=f"address space per kernel (default "
+                   f"{d.memory_bytes / (1 << 30):g} GB)")
     p.set_defaults(func=_grade)
 
 

@@ -9,23 +9,21 @@ that calls a check from :mod:`annslam_lib.grading` and may hold ``### BEGIN HIDD
 :func:`student_version` does what nbgrader's ``generate_assignment`` does to the cell
 sources (same delimiters, matched anywhere in a line; same stub; hidden tests removed;
 outputs cleared), so a course can use either tool; a test compares the two when nbgrader is
-installed. :func:`grade` executes a notebook and scores its test cells by their points.
+installed. Grading lives in :mod:`annslam_lib.course.grader`.
 
     python -m annslam_lib release [--out student] [NOTEBOOK ...]
-    python -m annslam_lib grade NOTEBOOK [NOTEBOOK ...]
 """
 from __future__ import annotations
 
 import copy
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import nbformat
 
 __all__ = ["ReleaseError", "Exercise", "exercises", "validate", "student_version", "release",
-           "GradeResult", "NotebookGrade", "grade", "restore_tests", "exercise_table", "solution_lines", "hidden_test_lines",
-           "CODE_STUB", "TEXT_STUB"]
+           "exercise_table", "solution_lines", "hidden_test_lines", "CODE_STUB", "TEXT_STUB"]
 
 CODE_STUB = "# YOUR CODE HERE\nraise NotImplementedError()"  # nbgrader's Python stub
 TEXT_STUB = "YOUR ANSWER HERE"
@@ -166,8 +164,18 @@ def student_version(nb, name: str = "notebook"):
         if cell.cell_type == "code":
             cell.outputs, cell.execution_count = [], None
             cell.metadata.pop("execution", None)
+            if _is_grade(cell) and not _is_solution(cell):
+                _tag_raises(cell)
     nb.metadata.pop("widgets", None)  # saved widget state belongs to the executed copy
     return nb
+
+
+def _tag_raises(cell) -> None:
+    """Mark an autograded test cell ``raises-exception``: JupyterLab's Run All and nbclient
+    then go on past it while its exercise is not written yet (its check raises)."""
+    tags = cell.metadata.setdefault("tags", [])
+    if "raises-exception" not in tags:
+        tags.append("raises-exception")
 
 
 def _region_lines(nb, begin: str, end: str) -> set[str]:
@@ -229,121 +237,3 @@ def release(paths, out) -> list[Path]:
         nbformat.write(student_version(nb, p.name), dest)
         written.append(dest)
     return written
-
-
-# ------------------------------------------------------------------------------ grading
-
-@dataclass
-class GradeResult:
-    """One autograded cell after execution."""
-    grade_id: str
-    points: float
-    max_points: float
-    cell: int
-    error: str = ""  # 'GradingError: my_x is not written yet: ...' or '' if it passed
-
-    @property
-    def passed(self) -> bool:
-        return not self.error
-
-
-@dataclass
-class NotebookGrade:
-    """A graded notebook: its exercises, and errors in cells that are not exercises."""
-    notebook: str
-    results: list[GradeResult]
-    other_errors: list[tuple[int, str]] = field(default_factory=list)
-
-    @property
-    def score(self) -> float:
-        return sum(r.points for r in self.results)
-
-    @property
-    def max_score(self) -> float:
-        return sum(r.max_points for r in self.results)
-
-    def report(self) -> str:
-        lines = [f"{self.notebook}: {self.score:g} / {self.max_score:g} points"]
-        for r in self.results:
-            mark = "ok  " if r.passed else "FAIL"
-            lines.append(f"  {mark} {r.grade_id} ({r.points:g}/{r.max_points:g})")
-            if r.error:
-                lines += ["       " + s for s in r.error.splitlines()[:6]]
-        for i, err in self.other_errors:
-            lines.append(f"  error in cell {i} (not an exercise): {err.splitlines()[0]}")
-        return "\n".join(lines)
-
-
-def restore_tests(nb, instructor) -> int:
-    """Put the instructor's autograded cells (hidden tests included) back into a submission,
-    matched by grade id, as nbgrader's autograde does: a student cannot edit a test into
-    passing, and hidden tests run. Returns the number of cells restored; raises
-    :class:`ReleaseError` if a test cell of the instructor copy is missing."""
-    by_id = {_meta(c)["grade_id"]: c for c in nb.cells if _is_grade(c) and not _is_solution(c)}
-    n = 0
-    for cell in instructor.cells:
-        if _is_grade(cell) and not _is_solution(cell):
-            gid = _meta(cell)["grade_id"]
-            if gid not in by_id:
-                raise ReleaseError(f"the submission has no autograded cell {gid!r} (deleted?)")
-            by_id[gid].source = cell.source
-            n += 1
-    return n
-
-
-def _run_cells(nb, cwd: Path, *, timeout: int, kernel_name: str) -> dict[int, str]:
-    """Execute every code cell of ``nb`` on one fresh kernel, in order, errors allowed;
-    return {cell index: 'Name: message'} for the cells that raised.
-
-    Plain jupyter_client (``execute_interactive`` waits for the reply and for the kernel to
-    go idle), as nbval does: nbclient's widget-message handling sometimes sat idle for
-    minutes after an ``interactive`` widget cell here. A cell over ``timeout`` seconds is
-    interrupted and reported as an error."""
-    from jupyter_client.manager import start_new_kernel
-
-    km, kc = start_new_kernel(kernel_name=kernel_name, cwd=str(cwd), startup_timeout=120)
-    errors: dict[int, str] = {}
-    try:
-        for i, cell in enumerate(nb.cells):
-            if cell.cell_type != "code" or not cell.source.strip():
-                continue
-            seen: list[str] = []
-
-            def hook(msg, seen=seen):
-                if msg["msg_type"] == "error":
-                    seen.append(f"{msg['content']['ename']}: {msg['content']['evalue']}")
-            try:
-                reply = kc.execute_interactive(cell.source, timeout=timeout, output_hook=hook,
-                                               allow_stdin=False, store_history=True)
-            except TimeoutError:
-                km.interrupt_kernel()
-                errors[i] = f"TimeoutError: the cell did not finish in {timeout} s"
-                continue
-            content = reply["content"]
-            if content.get("status") == "error":
-                errors[i] = seen[0] if seen else f"{content.get('ename')}: {content.get('evalue')}"
-    finally:
-        kc.stop_channels()
-        km.shutdown_kernel(now=True)
-    return errors
-
-
-def grade(path, *, instructor=None, timeout: int = 600,
-          kernel_name: str = "python3") -> NotebookGrade:
-    """Execute the notebook at ``path`` on a fresh kernel (its folder as working directory,
-    errors allowed so every cell runs) and score each autograded cell: full points if it
-    raised nothing, else 0 with the error message. With ``instructor`` (the instructor
-    notebook's path), its test cells, hidden tests included, replace the submission's first
-    (:func:`restore_tests`). Errors in other cells are listed separately: in a student
-    version they mean the notebook depends on a student's answer outside the exercises."""
-    path = Path(path).resolve()
-    nb = nbformat.read(path, as_version=4)
-    found = validate(nb, path.name, instructor=False)
-    if instructor is not None:
-        restore_tests(nb, nbformat.read(Path(instructor), as_version=4))
-    errors = _run_cells(nb, path.parent, timeout=timeout, kernel_name=kernel_name)
-    graded = {ex.cell for ex in found}
-    results = [GradeResult(ex.grade_id, 0.0 if ex.cell in errors else ex.points, ex.points,
-                           ex.cell, errors.get(ex.cell, "")) for ex in found]
-    others = [(i, err) for i, err in sorted(errors.items()) if i not in graded]
-    return NotebookGrade(path.name, results, others)

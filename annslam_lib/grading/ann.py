@@ -22,7 +22,7 @@ from typing import Callable
 import numpy as np
 
 from .. import ann, paper
-from .core import Passed, GradingError, Mistake, call, check_function, fmt
+from .core import forbids, Passed, GradingError, Mistake, call, check_function, fmt
 
 __all__ = ["reference_forward", "check_forward", "mapminmax", "mapminmax_reverse",
            "check_mapminmax", "toy_problem", "reference_train_loop", "LOOP_MISTAKES",
@@ -185,6 +185,7 @@ def _forward_mistakes(cases: list[dict]) -> list[Mistake]:
     ]
 
 
+@forbids(reference_forward)
 def check_forward(fn: Callable, *, seed: int = 0, n: int = 6, quiet: bool = False) -> str:
     """Exercise 7.1 (notebook 07, section 1): ``fn(X, W1, b1, W2, b2, x_mean, x_std, y_mean,
     y_std)`` must return the correction (n, 2) of :func:`reference_forward` (nntool's fitnet:
@@ -305,6 +306,7 @@ def _mm_reverse_wrong(kind: str):
     return f
 
 
+@forbids(mapminmax, mapminmax_reverse)
 def check_mapminmax(fn: Callable, fn_reverse: Callable, *, seed: int = 0, n: int = 5,
                     quiet: bool = False) -> str:
     """Exercise 7.3 (notebook 07, section 3): ``fn(x, xmin, xmax)`` is nntool's mapminmax
@@ -510,6 +512,7 @@ def _same(a, b) -> bool:
     return a.shape == b.shape and bool(np.allclose(a, b, rtol=1e-7, atol=1e-10, equal_nan=True))
 
 
+@forbids(reference_train_loop, ann.train)
 def check_train_loop(fn: Callable, *, seed: int = 0, quiet: bool = False) -> str:
     """Exercise 7.2 (notebook 07, section 1): ``fn(net, X, Y, optimizer, epochs)`` trains
     ``net`` in place and returns the loss of each epoch (before its step). Run side by side

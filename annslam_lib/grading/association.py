@@ -15,9 +15,10 @@ import math
 import numpy as np
 from scipy.stats import chi2
 
-from ..association import GATE, NEW, NEW_LANDMARK, REJECTED, associate, mahalanobis
+from ..association import GATE, NEW, NEW_LANDMARK, REJECTED, associate, gate_threshold, mahalanobis
 from ..observation import observe
-from .core import Passed, Mistake, call, check_function, check_raises, describe, fail, fmt
+from .core import (forbids, Mistake, Passed, call, check_function, check_raises, describe, fail, fmt,
+                   prefetch)
 
 __all__ = ["check_innovation_d2", "check_in_gate", "check_associate"]
 
@@ -121,6 +122,7 @@ def _singular_cases():
     ]
 
 
+@forbids(mahalanobis)
 def check_innovation_d2(fn, *, seed: int = 0, n: int = 40,
                         name: str = "my_innovation_d2", quiet: bool = False) -> str:
     """Grade ``fn(z, zhat, H, P, R) -> d2``, the gating statistic of notebook 04 section 9:
@@ -234,6 +236,7 @@ def _as_bool(out, name: str, where: str) -> bool:
          f"False.")
 
 
+@forbids(gate_threshold)
 def check_in_gate(fn, *, seed: int = 0, n: int = 40, name: str = "my_in_gate",
                   quiet: bool = False) -> str:
     """Grade ``fn(d2, prob) -> bool``, the chi-square gate of notebook 04 section 9: True iff
@@ -245,6 +248,7 @@ def check_in_gate(fn, *, seed: int = 0, n: int = 40, name: str = "my_in_gate",
     """
     cases = _gate_cases(seed, n)
     names = ("d2", "prob")
+    prefetch(fn, cases)
     got = [_as_bool(call(fn, c, name=name, arg_names=names), name, describe(c, names))
            for c in cases]
     exp = [c[0] <= _ppf(c[1], 2) for c in cases]
@@ -363,6 +367,7 @@ def _explain(i: int, got: np.ndarray, exp: np.ndarray, d2: np.ndarray, gate: flo
     return f"z{i} should be REJECTED (-2), not {_code(g)}."
 
 
+@forbids(associate)
 def check_associate(fn, *, seed: int = 0, n: int = 40, name: str = "my_associate",
                     quiet: bool = False) -> str:
     """Grade ``fn(d2, gate, new_landmark) -> assign`` (n,), the data association of notebook
@@ -375,6 +380,7 @@ def check_associate(fn, *, seed: int = 0, n: int = 40, name: str = "my_associate
     got and should get, with the d2 values that decide it.
     """
     scenes = _assign_scenes() + _random_scenes(seed, n)
+    prefetch(fn, [(d2, gate, new) for _, d2, gate, new in scenes])
     for title, d2, gate, new in scenes:
         args = (d2.copy(), gate, new)
         out = call(fn, args, name=name, arg_names=("d2", "gate", "new_landmark"))

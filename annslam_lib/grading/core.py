@@ -14,19 +14,114 @@ so the cell fails like any assertion, but with a message a student can act on.
 """
 from __future__ import annotations
 
+import contextlib
+import contextvars
+import functools
+import sys
 from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
 import numpy as np
 
 __all__ = ["GradingError", "Mistake", "Passed", "call", "check_function", "check_jacobian", "check_raises",
-           "describe", "fail", "fmt", "NOT_WRITTEN"]
+           "describe", "fail", "fmt", "NOT_WRITTEN", "forbids", "forbidden", "watch_calls",
+           "function_path", "prefetch", "labelled", "passing_prefetch"]
 
 NOT_WRITTEN = "is not written yet"
 
 
 class GradingError(AssertionError):
-    """An exercise check failed; the message says what, where, expected vs got, and why."""
+    """An exercise check failed; the message says what, where, expected vs got, and why.
+
+    In a notebook the message is all a student sees: IPython shows what
+    ``_render_traceback_`` returns instead of a traceback into the grading code."""
+
+    def _render_traceback_(self) -> list[str]:
+        lines = str(self).splitlines() or [""]
+        return [f"\x1b[0;31mGradingError\x1b[0m: {lines[0]}", *lines[1:]]
+
+
+# ----------------------------------------------------------------------- forbidden calls
+
+_FORBIDDEN: contextvars.ContextVar[tuple[str, ...]] = contextvars.ContextVar(
+    "annslam_forbidden", default=())
+
+
+def function_path(fn) -> str:
+    """'module:qualname' of a function, the name the call monitor watches."""
+    fn = getattr(fn, "__wrapped__", fn)
+    return f"{fn.__module__}:{fn.__qualname__}"
+
+
+def forbids(*functions: Callable):
+    """Decorator for a check: a solution must not call these library functions (it is the
+    exercise to write them). While the check runs, a call to one of them from the student's
+    function fails with "my_f calls module.function: write it yourself" (here by a call
+    monitor; in the grader also by reading the solution's source)."""
+    paths = tuple(function_path(f) for f in functions)
+
+    def decorate(check):
+        @functools.wraps(check)
+        def wrapper(*args, **kwargs):
+            token = _FORBIDDEN.set(_FORBIDDEN.get() + paths)
+            try:
+                return check(*args, **kwargs)
+            finally:
+                _FORBIDDEN.reset(token)
+        wrapper.__annslam_forbids__ = paths
+        return wrapper
+    return decorate
+
+
+def forbidden() -> tuple[str, ...]:
+    """The 'module:qualname' paths forbidden by the checks running now."""
+    return _FORBIDDEN.get()
+
+
+def _code_of(path: str):
+    import importlib
+
+    mod, _, qual = path.partition(":")
+    try:
+        obj = importlib.import_module(mod)
+        for part in qual.split("."):
+            obj = getattr(obj, part)
+    except (ImportError, AttributeError):
+        return None
+    return getattr(obj, "__code__", None)
+
+
+@contextlib.contextmanager
+def watch_calls(paths: Sequence[str]):
+    """Record, in the yielded list, which of the functions ``paths`` ('module:qualname')
+    are called inside the block (``sys.setprofile``); a monitor removed by the code inside
+    is recorded too."""
+    watched = {c: p for p in paths if (c := _code_of(p)) is not None}
+    hits: list[str] = []
+    if not watched:
+        yield hits
+        return
+
+    def monitor(frame, event, arg):
+        if event == "call" and frame.f_code in watched:
+            hits.append(watched[frame.f_code])
+
+    previous = sys.getprofile()
+    sys.setprofile(monitor)
+    try:
+        yield hits
+    finally:
+        if sys.getprofile() is not monitor:
+            hits.append("<the call monitor was removed>")
+        sys.setprofile(previous)
+
+
+def forbidden_message(name: str, hits: Sequence[str]) -> str:
+    shown = [h.replace(":", ".") for h in dict.fromkeys(hits)]
+    if any(h.startswith("<") for h in shown):
+        return (f"{name} removed the grader's call monitor (sys.setprofile): a solution must "
+                "not interfere with the checks.")
+    return f"{name} calls {' and '.join(shown)}: write it yourself."
 
 
 class Passed(str):
@@ -83,10 +178,42 @@ def describe(args: Sequence, names: Sequence[str] | None = None) -> str:
     return ", ".join(f"{n}={fmt(a)}" for n, a in zip(names, args))
 
 
+def prefetch(fn: Callable, cases: Sequence[Sequence]) -> None:
+    """Tell ``fn`` the inputs it is about to be called with, one by one. A plain function
+    ignores this; the grader's proxy for a student's function (which runs in another
+    process) evaluates them all in one round trip, so the calls that follow are answered
+    from that batch."""
+    hook = getattr(fn, "__annslam_prefetch__", None)
+    if hook is not None:
+        hook([tuple(c) for c in cases])
+
+
+def labelled(fn: Callable, table: dict) -> Callable:
+    """``fn`` called with the arguments stored under a case label (checks whose inputs are
+    big arrays name the case by its label in messages); prefetching passes through."""
+    def by_label(label):
+        return fn(*table[label])
+    by_label.__annslam_prefetch__ = lambda cases: prefetch(fn, [table[c[0]] for c in cases])
+    return by_label
+
+
+def passing_prefetch(wrapper: Callable, fn: Callable) -> Callable:
+    """Mark ``wrapper`` (called with the same arguments as ``fn``) as prefetching for it."""
+    wrapper.__annslam_prefetch__ = lambda cases: prefetch(fn, cases)
+    return wrapper
+
+
 def call(fn: Callable, args: Sequence, *, name: str, arg_names: Sequence[str] | None = None):
     """Call the student's ``fn(*args)`` and turn what it raises into a :class:`GradingError`
     that names the function and the input (NotImplementedError: not written yet)."""
+    paths = forbidden()
     try:
+        if paths and not getattr(fn, "__annslam_remote__", False):
+            with watch_calls(paths) as hits:
+                out = fn(*args)
+            if hits:
+                raise GradingError(forbidden_message(name, hits))
+            return out
         return fn(*args)
     except NotImplementedError:
         raise GradingError(
@@ -133,6 +260,7 @@ class _Run:
 
 def _evaluate(fn, reference, cases, *, name, arg_names, output, angle_mask, atol, rtol,
               wrap_mask=None) -> _Run:
+    prefetch(fn, cases)
     got, exp, where = [], [], []
     for args in cases:
         args = tuple(args)

@@ -24,7 +24,8 @@ import numpy as np
 from .. import ekf_dense
 from ..geometry import wrap_angle
 from ..observation import inverse_observe, observe
-from .core import Passed, NOT_WRITTEN, GradingError, Mistake, call, check_function, check_raises, fmt
+from .core import (forbids, NOT_WRITTEN, GradingError, Mistake, Passed, call, check_function, check_raises,
+                   fmt, labelled)
 
 __all__ = ["check_augment", "check_joseph_covariance", "check_ekf_update"]
 
@@ -72,14 +73,7 @@ def _pair(i: int, name: str, what: str) -> Callable:
 def _first_is_pair(fn, table, name: str) -> None:
     """The function must return a pair (x_new, P_new): said before any comparison."""
     label = next(iter(table))
-    _pair(0, name, "")(call(_labelled(fn, table), (label,), name=name, arg_names=["case"]))
-
-
-def _labelled(fn, table):
-    """fn called with the arguments stored under a case label."""
-    def by_label(label):
-        return fn(*table[label])
-    return by_label
+    _pair(0, name, "")(call(labelled(fn, table), (label,), name=name, arg_names=["case"]))
 
 
 def _returned(fn, table):
@@ -120,7 +114,7 @@ def _asymmetry(M) -> float:
 def _check_symmetric(fn, table, *, name: str, part=lambda out: out, hint: str) -> None:
     """The covariance a function returns must be symmetric: names the first case and entry."""
     for label in table:
-        M = np.asarray(part(call(_labelled(fn, table), (label,), name=name, arg_names=["case"])),
+        M = np.asarray(part(call(labelled(fn, table), (label,), name=name, arg_names=["case"])),
                        dtype=float)
         if _asymmetry(M) > _SYM_RTOL:
             i, j = np.unravel_index(np.argmax(np.abs(M - M.T)), M.shape)
@@ -242,7 +236,7 @@ _AUG_COV_MISTAKES = [
 def _block_note(fn, reference, table, *, name) -> str:
     """Which block of P_new is wrong at the first failing case (augmentation layout)."""
     for label, args in table.items():
-        out = call(_labelled(fn, table), (label,), name=name, arg_names=["case"])
+        out = call(labelled(fn, table), (label,), name=name, arg_names=["case"])
         got = np.asarray(_pair(1, name, "")(out), dtype=float)
         exp = reference(*args)[1]
         if got.shape != exp.shape:
@@ -266,6 +260,7 @@ def _block_note(fn, reference, table, *, name) -> str:
     return ""
 
 
+@forbids(ekf_dense.augment_landmark)
 def check_augment(fn: Callable, *, seed: int = 0, n: int = 6) -> str:
     """Exercise 5.1 (notebook 05 section 1, landmark augmentation): ``fn(x, P, z, R)`` must
     return (x_new, P_new) as :func:`annslam_lib.ekf_dense.augment_landmark` for one new
@@ -276,17 +271,17 @@ def check_augment(fn: Callable, *, seed: int = 0, n: int = 6) -> str:
     P_new; names the wrong block otherwise."""
     name = "my_augment"
     table = _augment_cases(seed, n)
-    by = _labelled(fn, table)
-    ref = _labelled(_aug_ref, table)
+    by = labelled(fn, table)
+    ref = labelled(_aug_ref, table)
     _first_is_pair(fn, table, name)
     groups = _groups(table, lambda a: a[0].size)
-    x_mistakes = [Mistake(msg, _labelled(_aug_wrong_mean(k), table)) for k, msg in _AUG_MEAN_MISTAKES]
+    x_mistakes = [Mistake(msg, labelled(_aug_wrong_mean(k), table)) for k, msg in _AUG_MEAN_MISTAKES]
     for labels in groups:
         n_state = table[labels[0]][0].size
         check_function(by, ref, [(lab,) for lab in labels], name=name,
                        arg_names=["case"], labels=_names(n_state, 2), angles=(2,),
                        output=_pair(0, name, "x_new"), mistakes=x_mistakes, quiet=True)
-    p_mistakes = [Mistake(msg, _labelled(_aug_wrong_cov(k), table)) for k, msg in _AUG_COV_MISTAKES]
+    p_mistakes = [Mistake(msg, labelled(_aug_wrong_cov(k), table)) for k, msg in _AUG_COV_MISTAKES]
     for labels in groups:
         try:
             check_function(by, ref, [(lab,) for lab in labels], name=f"{name} (P_new)",
@@ -405,6 +400,7 @@ _JOSEPH_MISTAKES = [
 ]
 
 
+@forbids(ekf_dense.joseph_covariance, ekf_dense.joseph_update)
 def check_joseph_covariance(fn: Callable, *, seed: int = 0, n: int = 4) -> str:
     """Exercise 5.2 (notebook 05 section 3, the Joseph form): ``fn(P, H, R, K)`` must return
     (I - K H) P (I - K H)^T + K R K^T (:func:`annslam_lib.ekf_dense.joseph_covariance`)
@@ -414,9 +410,9 @@ def check_joseph_covariance(fn: Callable, *, seed: int = 0, n: int = 4) -> str:
     K R K^T, misplaced transposes and an asymmetric result."""
     name = "my_joseph_covariance"
     table = _joseph_cases(seed, n)
-    by = _labelled(fn, table)
-    ref = _labelled(ekf_dense.joseph_covariance, table)
-    mistakes = [Mistake(msg, _labelled(_joseph_wrong(k), table)) for k, msg in _JOSEPH_MISTAKES]
+    by = labelled(fn, table)
+    ref = labelled(ekf_dense.joseph_covariance, table)
+    mistakes = [Mistake(msg, labelled(_joseph_wrong(k), table)) for k, msg in _JOSEPH_MISTAKES]
     for labels in _groups(table, lambda a: a[1].shape):
         try:
             check_function(by, ref, [(lab,) for lab in labels], name=name, arg_names=["case"],
@@ -526,6 +522,7 @@ def _singular_cases(seed: int) -> list[tuple[str, tuple]]:
     return cases
 
 
+@forbids(ekf_dense.range_bearing_update, ekf_dense.joseph_update, ekf_dense.kalman_gain)
 def check_ekf_update(fn: Callable, *, seed: int = 0, n: int = 5) -> str:
     """Exercise 5.3 (notebook 05 section 3, the EKF update): ``fn(x, P, z, z_hat, H, R)`` must
     return (x_new, P_new) as :func:`annslam_lib.ekf_dense.range_bearing_update`: the wrapped
@@ -536,13 +533,13 @@ def check_ekf_update(fn: Callable, *, seed: int = 0, n: int = 5) -> str:
     reversed innovation, R^-1 for S^-1, an unwrapped heading, a missing K R K^T."""
     name = "my_ekf_update"
     table = _update_cases(seed, n)
-    by = _labelled(fn, table)
-    ref = _labelled(ekf_dense.range_bearing_update, table)
+    by = labelled(fn, table)
+    ref = labelled(ekf_dense.range_bearing_update, table)
     _first_is_pair(fn, table, name)
     groups = _groups(table, lambda a: (a[0].size, a[2].size))
-    x_mistakes = [Mistake(msg, _labelled(_update_wrong_mean(k), table))
+    x_mistakes = [Mistake(msg, labelled(_update_wrong_mean(k), table))
                   for k, msg in _UPDATE_MEAN_MISTAKES]
-    p_mistakes = [Mistake(msg, _labelled(_update_wrong_cov(k), table))
+    p_mistakes = [Mistake(msg, labelled(_update_wrong_cov(k), table))
                   for k, msg in _UPDATE_COV_MISTAKES]
     for labels in groups:
         n_state = table[labels[0]][0].size

@@ -28,7 +28,8 @@ import numpy as np
 from .. import kinematics, paper
 from ..geometry import numerical_jacobian, wrap_angle
 from ..vehicle import ACFR_UTE, Vehicle
-from .core import Passed, GradingError, Mistake, call, check_function, check_jacobian, describe, fmt
+from .core import (forbids, GradingError, Mistake, Passed, call, check_function, check_jacobian, describe,
+                   fmt, passing_prefetch, prefetch)
 
 __all__ = ["check_axle_speed", "check_euler_step", "check_process_jacobians", "check_laser_pose",
            "check_laser_velocity", "check_laser_pose_jacobian"]
@@ -50,7 +51,7 @@ def _copying(fn: Callable) -> Callable:
     change the cases the check compares afterwards."""
     def run(*args):
         return fn(*(a.copy() if isinstance(a, np.ndarray) else a for a in args))
-    return run
+    return passing_prefetch(run, fn)
 
 
 def _show(x) -> str:
@@ -81,7 +82,7 @@ def _part(fn: Callable, name: str, k: int, parts: tuple[str, ...], shapes: tuple
                                f"the outputs, columns the inputs you differentiate by, so its "
                                f"shape is {shapes[k]}.")
         return out[k]
-    return pick
+    return passing_prefetch(pick, fn)
 
 
 # ------------------------------------------------------------------ cases
@@ -171,6 +172,7 @@ _SPEED_MISTAKES = (
 )
 
 
+@forbids(kinematics.axle_speed)
 def check_axle_speed(fn: Callable, *, seed: int = 0, n: int = 40,
                      quiet: bool = False) -> str:
     """Grade ``fn(v_e, alpha, H, L) -> v_c``, the rear-axle-centre speed from the back-left
@@ -257,6 +259,7 @@ _STEP_MISTAKES = (
 def _check_wrapped(fn, cases, name, arg_names, column: int | None, label: str) -> None:
     """The heading of every output must lie in (-pi, pi] (check_function compares angles
     modulo 2 pi, so it would accept an unwrapped one)."""
+    prefetch(fn, cases)
     for args in cases:
         out = np.asarray(call(fn, args, name=name, arg_names=arg_names), dtype=float)
         h = float(out[column] if column is not None else out)
@@ -267,6 +270,7 @@ def _check_wrapped(fn, cases, name, arg_names, column: int | None, label: str) -
                 f"Wrap it, e.g. (h + np.pi) % (2 * np.pi) - np.pi.")
 
 
+@forbids(kinematics.predict, kinematics.predict_exact, kinematics.laser_velocity)
 def check_euler_step(fn: Callable, *, seed: int = 0, n: int = 40,
                      quiet: bool = False) -> str:
     """Grade ``fn(pose, control, dt, L, a, b) -> pose_next`` (3,), one Euler step of the laser
@@ -352,6 +356,7 @@ _G_MISTAKES = (
 )
 
 
+@forbids(kinematics.predict)
 def check_process_jacobians(fn: Callable, *, seed: int = 0, n: int = 30,
                             quiet: bool = False) -> str:
     """Grade ``fn(pose, control, dt, L, a, b) -> (F, G)``, the Jacobians of the Euler step of
@@ -433,6 +438,7 @@ _POSE_MISTAKES = (
 )
 
 
+@forbids(kinematics.laser_pose)
 def check_laser_pose(fn: Callable, *, seed: int = 0, n: int = 40,
                      quiet: bool = False) -> str:
     """Grade ``fn(axle_pose, a, b) -> laser_pose`` (3,): the laser a m ahead and b m left of the
@@ -502,6 +508,7 @@ _RATE_MISTAKES = (
 )
 
 
+@forbids(kinematics.laser_velocity)
 def check_laser_velocity(fn: Callable, *, seed: int = 0, n: int = 40,
                          quiet: bool = False) -> str:
     """Grade ``fn(pose, control, L, a, b) -> (x_dot, y_dot, phi_dot)``, the velocity of the laser
@@ -553,6 +560,7 @@ _JAC_MISTAKES = (
 )
 
 
+@forbids(kinematics.laser_pose)
 def check_laser_pose_jacobian(fn: Callable, *, seed: int = 0, n: int = 30,
                               quiet: bool = False) -> str:
     """Grade ``fn(axle_pose, a, b) -> J`` (3 x 3), the Jacobian of the laser pose with respect

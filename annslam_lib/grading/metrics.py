@@ -21,7 +21,8 @@ import numpy as np
 from ..metrics import trajectory_errors
 from ..records import Gps
 from ..widgets.victoria import gps_outliers
-from .core import Passed, GradingError, Mistake, call, check_function, check_raises, fmt
+from .core import (forbids, GradingError, Mistake, Passed, call, check_function, check_raises, fmt,
+                   labelled)
 
 __all__ = ["check_track_rmse", "check_gps_outliers"]
 
@@ -157,24 +158,34 @@ def _rmse_cases(seed: int, n: int) -> dict:
     return table
 
 
-def _labelled(fn, table):
-    def by_label(label):
-        return fn(*table[label])
-    return by_label
+def _real_run(name: str):
+    """(track, GPS) of a real run, for a check that names it ('victoria_park'): the run's
+    dead-reckoned laser track from its GPS-fitted start, and its GPS record. Computed by
+    the check itself, so a grader needs nothing from the student's notebook."""
+    from .. import datasets
+    from ..dead_reckoning import dead_reckon, initial_pose_from_gps
+
+    ds = datasets.load(name)
+    fit = initial_pose_from_gps(ds.odometry, ds.gps, ds.vehicle)
+    return dead_reckon(ds.odometry, fit.pose, ds.vehicle), ds.gps
 
 
+@forbids(trajectory_errors)
 def check_track_rmse(fn: Callable, *, seed: int = 0, n: int = 4, real=None) -> str:
     """Exercise 6.1 (notebook 06 section 3, the track against GPS): ``fn(traj, gps_t,
     gps_xy)`` must return the RMSE (m) of the track's position at the GPS fixes inside the
     track's time span, the track interpolated linearly to each fix time, as
     :func:`annslam_lib.metrics.trajectory_errors` ``.rmse``; and raise ValueError when no
     fix lies inside the span. Cases: 4 fixed synthetic drives (gaps, fixes outside the span,
-    a spike) plus ``n`` seeded ones; ``real=(traj, gps)`` adds the chapter's run. Catches the
+    a spike) plus ``n`` seeded ones; ``real=(traj, gps)`` adds a real run, and
+    ``real='victoria_park'`` that run's dead-reckoned track and GPS (:func:`_real_run`). Catches the
     mean, the MSE, a per-coordinate RMS, the median, the nearest or previous sample instead
     of interpolation, fixes outside the span (np.interp clamps), the GPS interpolated across
     its gaps."""
     name = "my_track_rmse"
     table = _rmse_cases(seed, n)
+    if isinstance(real, str):
+        real = _real_run(real)
     if real is not None:
         traj, gps = real
         if not isinstance(gps, Gps):
@@ -182,8 +193,8 @@ def check_track_rmse(fn: Callable, *, seed: int = 0, n: int = 4, real=None) -> s
         traj = np.asarray(traj, dtype=float)
         table[f"#{len(table)}: the chapter's run, {traj.shape[0]} track samples against "
               f"{len(gps)} GPS fixes"] = (traj, gps.t, gps.xy)
-    mistakes = [Mistake(msg, _labelled(_rmse_wrong(k), table)) for k, msg in _RMSE_MISTAKES]
-    check_function(_labelled(fn, table), _labelled(_rmse_ref, table),
+    mistakes = [Mistake(msg, labelled(_rmse_wrong(k), table)) for k, msg in _RMSE_MISTAKES]
+    check_function(labelled(fn, table), labelled(_rmse_ref, table),
                    [(lab,) for lab in table], name=name, arg_names=["case"], atol=1e-9,
                    rtol=1e-9, mistakes=mistakes, quiet=True)
     traj, gt, gxy = next(iter(table.values()))
@@ -191,7 +202,7 @@ def check_track_rmse(fn: Callable, *, seed: int = 0, n: int = 4, real=None) -> s
     none = {"no GPS fix inside the track's time span (all of them after its last sample)":
             (traj, late, gxy)}
     for why in none:
-        check_raises(_labelled(_shown(fn), none), (why,), name=name, arg_names=["case"],
+        check_raises(labelled(_shown(fn), none), (why,), name=name, arg_names=["case"],
                      why="no fix lies inside the track's time span, so there is nothing to "
                          "compare (an RMSE of no errors is undefined; np.mean would return "
                          "nan with a warning)")
@@ -317,6 +328,7 @@ def _fix_note(t, xy, i, max_speed, tolerance) -> str:
             f"{max_speed * dt + tolerance:.2f} m")
 
 
+@forbids(gps_outliers)
 def check_gps_outliers(fn: Callable, *, seed: int = 0, n: int = 3, gps: Gps | None = None,
                        max_speed: float = 10.0, tolerance: float = 3.0) -> str:
     """Exercise 6.2 (notebook 06 section 3, GPS outliers): ``fn(t, xy, max_speed,
@@ -324,11 +336,14 @@ def check_gps_outliers(fn: Callable, *, seed: int = 0, n: int = 3, gps: Gps | No
     gps_outliers`: fix i is an outlier if its step from fix i - 1 is longer than
     max_speed * (t[i] - t[i-1]) + tolerance, unless fix i - 1 is itself an outlier. Cases:
     4 synthetic GPS tracks (spikes, a jump that stays, a gap with a long legitimate move,
-    jitter) plus ``n`` seeded ones; ``gps`` adds a real GPS record. Catches flagging the
+    jitter) plus ``n`` seeded ones; ``gps`` adds a real GPS record (a ``records.Gps``, or a
+    run's name such as 'victoria_park'). Catches flagging the
     way back from a spike, a fixed dt, a missing tolerance, flags one fix early; otherwise
     names the first fix flagged or missed with its step and the allowed step."""
     name = "my_gps_outliers"
     table = _outlier_cases(seed, n)
+    if isinstance(gps, str):
+        gps = _real_run(gps)[1]
     if gps is not None:
         if not isinstance(gps, Gps):
             raise ValueError(f"gps must be a records.Gps, got {type(gps).__name__}")

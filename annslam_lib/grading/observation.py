@@ -16,7 +16,7 @@ import numpy as np
 
 from .. import paper
 from ..observation import inverse_observe, landmark_from_two_points, observe
-from .core import Mistake, call, check_function, check_jacobian, describe, fail
+from .core import forbids, Mistake, call, check_function, check_jacobian, describe, fail
 
 __all__ = ["check_observe", "check_observation_jacobian", "check_inverse_observe",
            "check_two_point_frame", "BEARING_HINT"]
@@ -93,6 +93,7 @@ def _bearing_variant(f):
     return _quiet(wrong)
 
 
+@forbids(observe)
 def check_observe(fn, *, seed: int = 0, n: int = 60, name: str = "my_observe",
                   quiet: bool = False) -> str:
     """Grade ``fn(pose, landmark) -> (range, bearing)``, the observation model h of notebook
@@ -180,6 +181,7 @@ def _printed_bearing_yi(H):
     H[1, 4] = H[1, 3]            # the print repeats d bearing / d x_i
 
 
+@forbids(observe)
 def check_observation_jacobian(fn, *, seed: int = 0, n: int = 60,
                                name: str = "my_observation_jacobian", quiet: bool = False) -> str:
     """Grade ``fn(pose, landmark) -> H`` (2 x 5), the Jacobian of (range, bearing) with
@@ -248,6 +250,7 @@ def _inverse_variant(angle, *, trig=(np.cos, np.sin), offset=True):
     return wrong
 
 
+@forbids(inverse_observe)
 def check_inverse_observe(fn, *, seed: int = 0, n: int = 60,
                           name: str = "my_inverse_observe", quiet: bool = False) -> str:
     """Grade ``fn(pose, z) -> (x_i, y_i)``, the inverse observation model g of notebook 03
@@ -330,6 +333,7 @@ def _theta_printed_fixed(pr, pl):
     return math.atan(dy / dx) - (math.pi if dx < 0 else 0.0)
 
 
+@forbids(landmark_from_two_points)
 def check_two_point_frame(fn, *, seed: int = 0, n: int = 60,
                           name: str = "my_two_point_frame", quiet: bool = False) -> str:
     """Grade ``fn(p_right, p_left) -> (i, j, theta)``, the landmark frame of two laser

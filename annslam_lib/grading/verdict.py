@@ -21,8 +21,9 @@ from typing import Callable
 
 import numpy as np
 
-from ..map_metrics import rigid_align
-from .core import Passed, GradingError, Mistake, check_function, check_raises
+from .. import ann
+from ..map_metrics import map_errors, rigid_align
+from .core import forbids, Passed, GradingError, Mistake, check_function, check_raises
 
 __all__ = ["check_rigid_align", "aligned_rmse", "check_aligned_rmse", "regression_line",
            "check_regression"]
@@ -126,6 +127,7 @@ def _packed(fn: Callable, name: str) -> Callable:
     return packed
 
 
+@forbids(rigid_align)
 def check_rigid_align(fn: Callable, *, seed: int = 0, n: int = 6, quiet: bool = False) -> str:
     """Exercise 8.1 (notebook 08, section 4): ``fn(a, b)`` returns the rotation R (2, 2) and
     translation t (2,) minimising sum |R a_i + t - b_i|^2 (Kabsch without scale, no
@@ -191,6 +193,7 @@ def _wrong_rmse(kind: str):
     return f
 
 
+@forbids(aligned_rmse, map_errors)
 def check_aligned_rmse(fn: Callable, *, seed: int = 0, n: int = 6, quiet: bool = False) -> str:
     """Exercise 8.2 (notebook 08, section 4): ``fn(mapped, true)`` returns the map RMSE after
     the best rigid alignment (:func:`aligned_rmse`) for paired landmarks, and raises
@@ -294,6 +297,7 @@ def _wrong_reg(kind: str):
     return f
 
 
+@forbids(regression_line, ann.regression)
 def check_regression(fn: Callable, *, seed: int = 0, n: int = 6, quiet: bool = False) -> str:
     """Exercise 8.3 (notebook 08, section 5): ``fn(outputs, targets)`` returns (slope,
     intercept, R) of :func:`regression_line`: both coordinates pooled, output = slope *

@@ -1,0 +1,265 @@
+"""Data, never code, between the grader and the kernel that runs a student's functions.
+
+The grader decides scores in its own process (:mod:`annslam_lib.course.grader`); a student's
+function runs in a sandboxed kernel, and only its arguments and its return value cross
+between the two, encoded here as JSON. Nothing is pickled: a value that is not one of the
+types below arrives as an :class:`Opaque` (its type name and a shortened repr), which no
+check accepts as an answer.
+
+Encoded types: None, bool, int, float, complex, str; tuple, list, dict with str keys;
+NumPy arrays and scalars of bool, integer, float or complex dtype (base64 of ``np.save``
+with ``allow_pickle=False``); torch tensors; torch ``nn.Sequential`` stacks of Linear, Tanh,
+ReLU, Sigmoid and Identity layers (their structure and weights) and the SGD and Adam
+optimizers over one module's parameters (their hyper-parameters), which is what the
+chapter 07 training-loop exercise passes; exceptions (class names along the MRO, module,
+message). Sizes are bounded (:data:`MAX_BYTES`).
+"""
+from __future__ import annotations
+
+import base64
+import io
+import json
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["MAX_BYTES", "CodecError", "Opaque", "RemoteException", "encode", "decode",
+           "dumps", "loads"]
+
+#: Largest encoded message accepted (a student's function returning a huge array is refused
+#: before it is parsed).
+MAX_BYTES = 64 << 20
+_DTYPE_KINDS = "biufc"
+_LAYERS = ("Linear", "Tanh", "ReLU", "Sigmoid", "Identity")
+_OPTIMIZERS = ("SGD", "Adam")
+
+
+class CodecError(ValueError):
+    """A value cannot be encoded, or a message is malformed or too large."""
+
+
+@dataclass(frozen=True)
+class Opaque:
+    """A value of a type the codec does not carry: only its type name and a short repr."""
+    type_name: str
+    text: str
+
+    def __repr__(self) -> str:
+        return self.text
+
+    def __str__(self) -> str:
+        return self.text
+
+
+@dataclass(frozen=True)
+class RemoteException:
+    """An exception raised in the kernel: its class names along the MRO (most derived
+    first), the defining module of the first, and its message."""
+    names: tuple[str, ...]
+    module: str
+    message: str
+
+
+def _array(a: np.ndarray) -> dict:
+    if a.dtype.kind not in _DTYPE_KINDS:
+        raise CodecError(f"array of dtype {a.dtype} cannot be sent")
+    buf = io.BytesIO()
+    np.save(buf, np.ascontiguousarray(a), allow_pickle=False)
+    return {"t": "nd", "b": base64.b64encode(buf.getvalue()).decode("ascii")}
+
+
+def _torch():
+    import torch
+    return torch
+
+
+def _module_spec(m) -> dict:
+    torch = _torch()
+    if not isinstance(m, torch.nn.Sequential):
+        raise CodecError(f"torch module {type(m).__name__} cannot be sent (only nn.Sequential)")
+    layers = []
+    for layer in m:
+        kind = type(layer).__name__
+        if kind not in _LAYERS or type(layer).__module__.split(".")[0] != "torch":
+            raise CodecError(f"layer {kind} cannot be sent")
+        if kind == "Linear":
+            layers.append([kind, layer.in_features, layer.out_features, layer.bias is not None])
+        else:
+            layers.append([kind])
+    dtype = str(next(m.parameters()).dtype).removeprefix("torch.") if any(
+        True for _ in m.parameters()) else "float32"
+    state = {k: encode(v.detach().cpu().numpy()) for k, v in m.state_dict().items()}
+    return {"t": "module", "layers": layers, "dtype": dtype, "state": state}
+
+
+def build_module(spec: dict):
+    """The torch ``nn.Sequential`` described by an encoded module (structure, then weights)."""
+    torch = _torch()
+    layers = []
+    for item in spec["layers"]:
+        kind = item[0]
+        if kind not in _LAYERS:
+            raise CodecError(f"unknown layer {kind!r}")
+        if kind == "Linear":
+            _, n_in, n_out, bias = item
+            layers.append(torch.nn.Linear(int(n_in), int(n_out), bias=bool(bias)))
+        else:
+            layers.append(getattr(torch.nn, kind)())
+    m = torch.nn.Sequential(*layers)
+    dtype = spec.get("dtype", "float32")
+    if dtype not in ("float32", "float64"):
+        raise CodecError(f"module dtype {dtype!r} cannot be built")
+    m = m.to(getattr(torch, dtype))
+    load_state(m, spec["state"])
+    return m
+
+
+def load_state(module, state: dict) -> None:
+    """Copy encoded weights into ``module`` in place (names and shapes must match)."""
+    torch = _torch()
+    own = module.state_dict()
+    if set(own) != set(state):
+        raise CodecError(f"module weights {sorted(state)} do not match {sorted(own)}")
+    with torch.no_grad():
+        for k, v in own.items():
+            arr = decode(state[k])
+            if not isinstance(arr, np.ndarray) or arr.shape != tuple(v.shape):
+                raise CodecError(f"weight {k!r} has the wrong shape")
+            v.copy_(torch.from_numpy(np.array(arr)))
+
+
+def _optimizer_spec(opt, modules: list) -> dict:
+    torch = _torch()
+    kind = type(opt).__name__
+    if kind not in _OPTIMIZERS or not isinstance(opt, torch.optim.Optimizer):
+        raise CodecError(f"optimizer {kind} cannot be sent (only {', '.join(_OPTIMIZERS)})")
+    if len(opt.param_groups) != 1:
+        raise CodecError("only an optimizer with one parameter group can be sent")
+    group = opt.param_groups[0]
+    params = group["params"]
+    for i, m in enumerate(modules):
+        if [id(p) for p in m.parameters()] == [id(p) for p in params]:
+            hyper = {k: v for k, v in group.items() if k != "params"
+                     and isinstance(v, (bool, int, float, tuple, type(None)))}
+            return {"t": "optim", "kind": kind, "module": i, "hyper": encode(hyper)}
+    raise CodecError("an optimizer can be sent only with the module whose parameters it holds")
+
+
+def build_optimizer(spec: dict, modules: list):
+    torch = _torch()
+    kind = spec["kind"]
+    if kind not in _OPTIMIZERS:
+        raise CodecError(f"unknown optimizer {kind!r}")
+    hyper = decode(spec["hyper"])
+    allowed = {"SGD": ("lr", "momentum", "dampening", "weight_decay", "nesterov"),
+               "Adam": ("lr", "betas", "eps", "weight_decay", "amsgrad")}[kind]
+    kwargs = {k: hyper[k] for k in allowed if k in hyper}
+    return getattr(torch.optim, kind)(modules[int(spec["module"])].parameters(), **kwargs)
+
+
+def encode(value, _modules: list | None = None):
+    """A JSON-ready tree for ``value`` (see the module docstring); :class:`Opaque` for
+    anything else. ``_modules`` collects torch modules so an optimizer can refer to one."""
+    modules = [] if _modules is None else _modules
+    if value is None or isinstance(value, (bool, str)):
+        return value
+    if isinstance(value, int) and not isinstance(value, bool):
+        return {"t": "int", "v": str(value)}
+    if isinstance(value, float):
+        return value if math.isfinite(value) else {"t": "float", "v": repr(value)}
+    if isinstance(value, complex):
+        return {"t": "complex", "v": [value.real, value.imag]}
+    if isinstance(value, np.ndarray):
+        return _array(value)
+    if isinstance(value, np.generic):
+        if value.dtype.kind in _DTYPE_KINDS:
+            return {"t": "np", "v": _array(np.asarray(value))}
+        return {"t": "opaque", "type": type(value).__name__, "text": repr(value)[:200]}
+    if isinstance(value, (tuple, list)):
+        return {"t": "tuple" if isinstance(value, tuple) else "list",
+                "v": [encode(v, modules) for v in value]}
+    if isinstance(value, dict):
+        if not all(isinstance(k, str) for k in value):
+            return {"t": "opaque", "type": "dict", "text": repr(value)[:200]}
+        return {"t": "dict", "v": {k: encode(v, modules) for k, v in value.items()}}
+    if isinstance(value, BaseException):
+        mro = tuple(c.__name__ for c in type(value).__mro__ if c is not object)
+        return {"t": "exc", "names": list(mro), "module": type(value).__module__,
+                "msg": str(value)[:2000]}
+    mod = type(value).__module__.split(".")[0]
+    if mod == "torch":
+        torch = _torch()
+        if isinstance(value, torch.Tensor):
+            return {"t": "tensor", "v": _array(value.detach().cpu().numpy()),
+                    "grad": value.requires_grad}
+        if isinstance(value, torch.nn.Module):
+            modules.append(value)
+            return _module_spec(value)
+        if isinstance(value, torch.optim.Optimizer):
+            return _optimizer_spec(value, modules)
+    text = repr(value)
+    return {"t": "opaque", "type": type(value).__name__, "text": text[:200]}
+
+
+def decode(tree, _modules: list | None = None):
+    """The value of an encoded tree (torch objects are rebuilt; others as encoded)."""
+    modules = [] if _modules is None else _modules
+    if tree is None or isinstance(tree, (bool, str, float)):
+        return tree
+    if isinstance(tree, int):
+        return tree
+    if not isinstance(tree, dict) or "t" not in tree:
+        raise CodecError("malformed message")
+    t = tree["t"]
+    if t == "int":
+        return int(tree["v"])
+    if t == "float":
+        return float(tree["v"])
+    if t == "complex":
+        return complex(*tree["v"])
+    if t == "nd":
+        a = np.load(io.BytesIO(base64.b64decode(tree["b"])), allow_pickle=False)
+        if a.dtype.kind not in _DTYPE_KINDS:
+            raise CodecError(f"array of dtype {a.dtype} refused")
+        return a
+    if t == "np":
+        return decode(tree["v"])[()]
+    if t in ("tuple", "list"):
+        items = [decode(v, modules) for v in tree["v"]]
+        return tuple(items) if t == "tuple" else items
+    if t == "dict":
+        return {str(k): decode(v, modules) for k, v in tree["v"].items()}
+    if t == "exc":
+        return RemoteException(tuple(str(n) for n in tree["names"]), str(tree["module"]),
+                               str(tree["msg"]))
+    if t == "opaque":
+        return Opaque(str(tree["type"]), str(tree["text"]))
+    if t == "tensor":
+        torch = _torch()
+        x = torch.from_numpy(np.array(decode(tree["v"])))
+        return x.requires_grad_() if tree.get("grad") and x.is_floating_point() else x
+    if t == "module":
+        m = build_module(tree)
+        modules.append(m)
+        return m
+    if t == "optim":
+        return build_optimizer(tree, modules)
+    raise CodecError(f"unknown value type {t!r}")
+
+
+def dumps(value) -> str:
+    text = json.dumps(encode(value), allow_nan=False, separators=(",", ":"))
+    if len(text) > MAX_BYTES:
+        raise CodecError(f"message of {len(text)} bytes exceeds {MAX_BYTES}")
+    return text
+
+
+def loads(text: str):
+    if not isinstance(text, str) or len(text) > MAX_BYTES:
+        raise CodecError("message missing or too large")
+    try:
+        tree = json.loads(text)
+    except ValueError as e:
+        raise CodecError(f"malformed message: {e}") from None
+    return decode(tree)

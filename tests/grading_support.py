@@ -1,0 +1,109 @@
+"""A small instructor notebook with two real exercises, and submissions made from it.
+
+Grading a real chapter runs the whole chapter (5-30 s); the attacks of
+tests/test_grader_attacks.py only need the grading machinery, so they use this two-exercise
+notebook, built like the course's chapters (nbgrader schema 3, the course's real checks,
+hidden tests), which grades in a few seconds.
+"""
+from __future__ import annotations
+
+import copy
+
+import nbformat
+from nbformat.v4 import new_code_cell, new_markdown_cell, new_notebook
+
+from annslam_lib import release
+
+OBSERVE = '''def my_observe(pose, landmark):
+    """Range and laser bearing of `landmark` from the laser `pose`."""
+    ### BEGIN SOLUTION
+    dx, dy = landmark[0] - pose[0], landmark[1] - pose[1]
+    bearing = np.arctan2(dy, dx) - pose[2] + np.pi / 2
+    return np.hypot(dx, dy), (bearing + np.pi) % (2 * np.pi) - np.pi
+    ### END SOLUTION'''
+
+SPEED = '''def my_axle_speed(v_e, alpha, H, L):
+    """Rear-axle-centre speed from the encoder speed."""
+    ### BEGIN SOLUTION
+    return v_e / (1 - np.tan(alpha) * H / L)
+    ### END SOLUTION'''
+
+OBSERVE_BODY = OBSERVE.replace("    ### BEGIN SOLUTION\n", "").replace("\n    ### END SOLUTION", "")
+SPEED_BODY = SPEED.replace("    ### BEGIN SOLUTION\n", "").replace("\n    ### END SOLUTION", "")
+POINTS = {"ex-observe-tests": 2, "ex-speed-tests": 3}
+
+
+def _meta(gid: str, *, grade: bool, solution: bool, points=None) -> dict:
+    m = {"grade": grade, "grade_id": gid, "locked": not solution, "schema_version": 3,
+         "solution": solution, "task": False}
+    if points is not None:
+        m["points"] = points
+    return m
+
+
+def _cell(src: str, **meta):
+    c = new_code_cell(src)
+    c.metadata["nbgrader"] = _meta(**meta)
+    return c
+
+
+def instructor():
+    """The instructor notebook: imports, two solution cells, two test cells with hidden
+    tests, a course cell between them and one at the end."""
+    return new_notebook(cells=[
+        new_markdown_cell("# A small chapter\nTwo exercises."),
+        new_code_cell("import numpy as np\nfrom annslam_lib import kinematics, observation\n"
+                      "from annslam_lib.grading import kinematics as gkin\n"
+                      "from annslam_lib.grading import observation as gk"),
+        new_markdown_cell("### Exercise 1 (2 points)"),
+        _cell(OBSERVE, gid="ex-observe", grade=False, solution=True),
+        _cell("# Autograded: exercise 1 (2 points)\ngk.check_observe(my_observe)\n"
+              "### BEGIN HIDDEN TESTS\ngk.check_observe(my_observe, seed=7, n=40, quiet=True)\n"
+              "### END HIDDEN TESTS", gid="ex-observe-tests", grade=True, solution=False,
+              points=POINTS["ex-observe-tests"]),
+        new_code_cell("z, _, _ = observation.observe(np.zeros(3), np.array([3.0, 4.0]))\n"
+                      "print(round(float(z[0]), 3))"),
+        new_markdown_cell("### Exercise 2 (3 points)"),
+        _cell(SPEED, gid="ex-speed", grade=False, solution=True),
+        _cell("# Autograded: exercise 2 (3 points)\ngkin.check_axle_speed(my_axle_speed)\n"
+              "### BEGIN HIDDEN TESTS\ngkin.check_axle_speed(my_axle_speed, seed=8, n=30, "
+              "quiet=True)\n### END HIDDEN TESTS", gid="ex-speed-tests", grade=True,
+              solution=False, points=POINTS["ex-speed-tests"]),
+        new_code_cell("print('the end')"),
+    ], metadata={"kernelspec": {"name": "python3", "display_name": "Python 3",
+                                "language": "python"}})
+
+
+def student():
+    """The student version (the course's own release)."""
+    return release.student_version(instructor(), "chapter")
+
+
+def solution_index(nb, gid: str) -> int:
+    return next(i for i, c in enumerate(nb.cells)
+                if c.metadata.get("nbgrader", {}).get("grade_id") == gid)
+
+
+def submission(observe: str | None = None, speed: str | None = None, *, extra_cells=(),
+               edit=None):
+    """A student version whose two solution cells hold ``observe`` and ``speed`` (None: the
+    stub left as released); ``extra_cells`` are appended; ``edit(nb)`` changes it further."""
+    nb = student()
+    if observe is not None:
+        nb.cells[solution_index(nb, "ex-observe")].source = observe
+    if speed is not None:
+        nb.cells[solution_index(nb, "ex-speed")].source = speed
+    for c in extra_cells:
+        nb.cells.append(copy.deepcopy(c))
+    if edit is not None:
+        edit(nb)
+    return nb
+
+
+def honest():
+    return submission(OBSERVE_BODY, SPEED_BODY)
+
+
+def write(nb, path) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    nbformat.write(nb, path)
