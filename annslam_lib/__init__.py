@@ -1,13 +1,18 @@
-"""annslam_lib: the library behind the annslam course on EKF-SLAM for a car-like
-vehicle with an ANN landmark model.
+"""annslam_lib: the library behind the annslam course on EKF-SLAM for a car-like vehicle
+with an ANN landmark model. Folders are layers, bottom to top:
 
-Modules (each named after what it holds):
-- ``vehicle``: the car's geometry (L, H, a, b)
-- ``records``: the dataset object shared by real runs and the simulator
-- ``registry``, ``fetch``, ``datasets``: the real runs, hash-checked, and their loaders
-- ``simulate``: a seeded simulator of the same car with ground truth
-- ``geometry``, ``kinematics``, ``observation``: the models and their Jacobians
-- ``paper``: the paper's equations as printed (with their typos) and the errata
-- ``plotting``, ``widgets``: figure and widget helpers for the notebooks
+- ``data``: records, the registry of real runs, download, loaders, the simulator
+- ``models``: geometry, the vehicle, motion and observation models, uncertainty
+- ``perception``: beacons and trees from sensor data, data association
+- ``slam``: the EKF (efficient and dense), its configuration, the run loop, results
+- ``evaluation``: trajectory and map errors, consistency, the run summary, timing
+- ``ann``: the landmark network (training set, network, save/load, evaluation)
+- ``paper``: the paper's printed equations, the errata, the study and the report
+- ``plots``: one style module and the shared figures
+- ``chapters``: one companion module per notebook (explorers, chapter-only figures)
+- ``grading``: the exercises' checks
+- ``course``: release, grading, the student workspace, the command line
+
+Importing this package imports nothing heavy: each layer loads when it is used.
 """
 __version__ = "0.1.0"

@@ -21,11 +21,17 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from annslam_lib import datasets, ekf_slam, metrics  # noqa: E402
-from annslam_lib.ekf_dense import DenseEkfSlam  # noqa: E402
-from annslam_lib.observation import observe  # noqa: E402
-from annslam_lib.records import Odometry  # noqa: E402
-from annslam_lib.vehicle import ACFR_UTE  # noqa: E402
+  # noqa: E402
+from annslam_lib.slam.dense import DenseEkfSlam  # noqa: E402
+from annslam_lib.models.observation import observe  # noqa: E402
+from annslam_lib.data.records import Odometry  # noqa: E402
+from annslam_lib.models.vehicle import ACFR_UTE  # noqa: E402
+from annslam_lib.data import loaders
+from annslam_lib.evaluation import trajectory
+from annslam_lib.models import motion
+from annslam_lib.slam import config as slam_config
+from annslam_lib.slam import efficient
+from annslam_lib.slam import runner
 
 SIGMA_R, SIGMA_B = 0.1, math.radians(1.0)
 
@@ -62,12 +68,12 @@ def time_steps(f, steps: int, controls, rng) -> tuple[float, float, float]:
 def per_step(sizes=(50, 150, 300), quick=False) -> None:
     odo = Odometry(t=np.arange(200) * 0.025, speed=np.full(200, 2.0),
                    steering=0.2 * np.sin(np.arange(200) / 20))
-    controls = ekf_slam.control_table(odo, ACFR_UTE, 0.7, math.radians(7))
+    controls = motion.control_table(odo, ACFR_UTE, 0.7, math.radians(7))
     print("per step: one odometry prediction + one update with one observation")
     print(f"{'N':>5} {'n':>5} | {'predict eff/dense (us)':>24} | {'update eff/dense (us)':>24} | "
           f"{'step eff/dense (us)':>24} | ratio")
     for N in sizes:
-        eff = make_filter(ekf_slam.EkfSlam, N)
+        eff = make_filter(efficient.EkfSlam, N)
         dense = make_filter(DenseEkfSlam, N)
         n_eff = 200 if quick else 2000
         n_dense = max(3, int((20 if quick else 60) * (50 / N) ** 2))
@@ -81,17 +87,17 @@ def per_step(sizes=(50, 150, 300), quick=False) -> None:
 
 
 def whole_run(name: str, repeats: int = 3) -> None:
-    ds = datasets.load(name)
-    cfg = ekf_slam.SlamConfig.for_dataset(name)
+    ds = loaders.load(name)
+    cfg = slam_config.SlamConfig.for_dataset(name)
     best = None
     for _ in range(repeats):
         w, c = time.perf_counter(), time.process_time()
-        r = ekf_slam.run(ds, cfg, progress=False)
+        r = runner.run(ds, cfg, progress=False)
         wall, cpu = time.perf_counter() - w, time.process_time() - c
         print(f"  {name}: {wall:.2f} s wall, {cpu:.2f} s CPU")
         best = (wall, cpu, r) if best is None or wall < best[0] else best
     wall, cpu, r = best
-    e = metrics.trajectory_errors(r.odometry_trajectory, ds.gps)
+    e = trajectory.trajectory_errors(r.odometry_trajectory, ds.gps)
     c = r.counts
     print(f"  {name} best: {wall:.2f} s wall ({cpu:.2f} s CPU); {c['predicts']} predictions, "
           f"{c['scans']} scans, {c['updates']} batch updates, {c['associated']} associated / "

@@ -11,8 +11,8 @@ import copy
 
 import nbformat
 from nbformat.v4 import new_code_cell, new_markdown_cell, new_notebook
+from annslam_lib.course import release
 
-from annslam_lib import release
 
 OBSERVE = '''def my_observe(pose, landmark):
     """Range and laser bearing of `landmark` from the laser `pose`."""
@@ -52,7 +52,7 @@ def instructor():
     tests, a course cell between them and one at the end."""
     return new_notebook(cells=[
         new_markdown_cell("# A small chapter\nTwo exercises."),
-        new_code_cell("import numpy as np\nfrom annslam_lib import kinematics, observation\n"
+        new_code_cell("import numpy as np\nfrom annslam_lib.models import motion, observation\n"
                       "from annslam_lib.grading import kinematics as gkin\n"
                       "from annslam_lib.grading import observation as gk"),
         new_markdown_cell("### Exercise 1 (2 points)"),

@@ -6,17 +6,21 @@ import pickle
 
 import numpy as np
 import pytest
+import torch
 
-torch = pytest.importorskip("torch")
-
-from annslam_lib import ann, ekf_slam, simulate  # noqa: E402
-from annslam_lib.observation import inverse_observe, observe  # noqa: E402
+from annslam_lib import ann
+from annslam_lib.ann import network
+from annslam_lib.models.observation import inverse_observe, observe
+from annslam_lib.data import simulate
+from annslam_lib.slam import config as slam_config
+from annslam_lib.slam import results as slam_results
+from annslam_lib.slam import runner
 
 
 @functools.lru_cache(maxsize=None)
 def _sim(bias: float):
     ds = simulate.simulate(range_bias=bias)
-    res = ekf_slam.run(ds, ekf_slam.SlamConfig.for_dataset("simulated"))
+    res = runner.run(ds, slam_config.SlamConfig.for_dataset("simulated"))
     return ds, res, ann.training_set(res, ds)
 
 
@@ -32,7 +36,7 @@ def sim_bias():
 
 @pytest.fixture(scope="module")
 def car_park_run(car_park):
-    res = ekf_slam.run(car_park, ekf_slam.SlamConfig.for_dataset("car_park"))
+    res = runner.run(car_park, slam_config.SlamConfig.for_dataset("car_park"))
     return car_park, res, ann.training_set(res, car_park)
 
 
@@ -47,7 +51,7 @@ def quick_model(sim):
 def test_training_set_simulator(sim):
     ds, res, ts = sim
     log = res.observations
-    used = np.isin(log.status, [ekf_slam.STATUS["associated"], ekf_slam.STATUS["new"]]) \
+    used = np.isin(log.status, [slam_results.STATUS["associated"], slam_results.STATUS["new"]]) \
         & (log.landmark >= 0)
     n = int(used.sum())
     assert n > 1000 and len(ts) == n
@@ -140,10 +144,10 @@ def test_leave_beacons_out_folds_never_share_beacons(sim):
 @pytest.mark.parametrize("hidden", [(10,), (5, 4)])
 def test_backprop_jacobian_matches_autodiff(hidden):
     X = torch.from_numpy(np.random.default_rng(0).normal(size=(50, 7)))
-    shapes = ann._shapes(7, hidden)
-    theta = ann._init(shapes, 1)
-    J_auto = torch.func.jacfwd(lambda th: ann._forward(th, X, shapes).reshape(-1))(theta)
-    J = ann._jacobian(theta, X, shapes)
+    shapes = network._shapes(7, hidden)
+    theta = network._init(shapes, 1)
+    J_auto = torch.func.jacfwd(lambda th: network._forward(th, X, shapes).reshape(-1))(theta)
+    J = network._jacobian(theta, X, shapes)
     assert J.shape == (100, theta.numel())
     torch.testing.assert_close(J, J_auto, rtol=0, atol=1e-13)
 
@@ -337,7 +341,7 @@ def test_pseudo_measurement_round_trip(quick_model, sim):
 
 def _zero_model(sigma_range, sigma_bearing):
     """A network whose correction is exactly zero: its landmark is the inverse observation."""
-    n_par = sum(o * n + o for o, n in ann._shapes(len(ann.FEATURE_NAMES), (10,)))
+    n_par = sum(o * n + o for o, n in network._shapes(len(ann.FEATURE_NAMES), (10,)))
     return ann.TrainedModel(config=ann.TrainConfig(), theta=torch.zeros(n_par, dtype=torch.float64),
                             x_mean=np.zeros(12), x_std=np.ones(12), y_mean=np.zeros(2),
                             y_std=np.ones(2), sigma_range=sigma_range, sigma_bearing=sigma_bearing)
@@ -356,14 +360,14 @@ def test_zero_correction_reproduces_the_plain_filter(which, request):
         ds, plain, _ = request.getfixturevalue("car_park_run")
     cfg = plain.config
     ann_cfg = cfg.replace(landmark_model="ann")
-    r = ekf_slam.run(ds, ann_cfg, landmark_model=_zero_model(cfg.sigma_range, cfg.sigma_bearing))
+    r = runner.run(ds, ann_cfg, landmark_model=_zero_model(cfg.sigma_range, cfg.sigma_bearing))
     np.testing.assert_array_equal(r.observations.status, plain.observations.status)
     np.testing.assert_array_equal(r.observations.landmark, plain.observations.landmark)
     np.testing.assert_allclose(r.landmarks, plain.landmarks, rtol=0, atol=1e-9)
     np.testing.assert_allclose(r.trajectory, plain.trajectory, rtol=0, atol=1e-9)
     np.testing.assert_allclose(r.covariance, plain.covariance, rtol=0, atol=1e-12)
     # The identity model passes z itself: bitwise the plain run.
-    same = ekf_slam.run(ds, ann_cfg, landmark_model=ann.InverseModel(cfg.sigma_range,
+    same = runner.run(ds, ann_cfg, landmark_model=ann.InverseModel(cfg.sigma_range,
                                                                      cfg.sigma_bearing))
     np.testing.assert_array_equal(same.landmarks, plain.landmarks)
     np.testing.assert_array_equal(same.covariance, plain.covariance)
@@ -375,13 +379,13 @@ def test_ann_filter_corrects_a_range_bias_on_a_new_layout(sim_bias):
     _, _, ts = sim_bias
     model = ann.train(ts, ann.beacon_folds(ts)[0])
     ds = simulate.simulate(seed=1, range_bias=0.3)
-    cfg = ekf_slam.SlamConfig.for_dataset("simulated")
-    from annslam_lib.map_metrics import map_errors
-    plain = map_errors(ekf_slam.run(ds, cfg).landmarks, ds.beacons)
-    with_ann = map_errors(ekf_slam.run(ds, cfg.replace(landmark_model="ann"),
+    cfg = slam_config.SlamConfig.for_dataset("simulated")
+    from annslam_lib.evaluation.map import map_errors
+    plain = map_errors(runner.run(ds, cfg).landmarks, ds.beacons)
+    with_ann = map_errors(runner.run(ds, cfg.replace(landmark_model="ann"),
                                        landmark_model=model).landmarks, ds.beacons)
     # Control: the plain filter with the model's (larger) noise: the noise is not the cure.
-    control = map_errors(ekf_slam.run(ds, cfg.replace(sigma_range=model.sigma_range,
+    control = map_errors(runner.run(ds, cfg.replace(sigma_range=model.sigma_range,
                                                       sigma_bearing=model.sigma_bearing)).landmarks,
                          ds.beacons)
     print(f"\nplain {plain.summary()}\nANN   {with_ann.summary()}\nctrl  {control.summary()}")
@@ -395,19 +399,19 @@ def test_landmark_model_switch_is_checked(sim):
     cfg = plain.config
     inv = ann.InverseModel(0.1, 0.02)
     with pytest.raises(ValueError, match="landmark_model"):
-        ekf_slam.SlamConfig(landmark_model="nn")
+        slam_config.SlamConfig(landmark_model="nn")
     with pytest.raises(ValueError, match="needs the trained model"):
-        ekf_slam.run(ds, cfg.replace(landmark_model="ann"))
+        runner.run(ds, cfg.replace(landmark_model="ann"))
     with pytest.raises(ValueError, match="'inverse'"):
-        ekf_slam.run(ds, cfg, landmark_model=inv)
+        runner.run(ds, cfg, landmark_model=inv)
     with pytest.raises(ValueError, match="pseudo_measurement"):
-        ekf_slam.run(ds, cfg.replace(landmark_model="ann"), landmark_model=object())
+        runner.run(ds, cfg.replace(landmark_model="ann"), landmark_model=object())
 
     class Broken(ann.InverseModel):
         def pseudo_measurement(self, pose, z, intensity=None, width=None):
             return np.full((len(z), 2), np.nan)
     with pytest.raises(ValueError, match="invalid pseudo-measurements"):
-        ekf_slam.run(ds, cfg.replace(landmark_model="ann"), landmark_model=Broken(0.1, 0.02))
+        runner.run(ds, cfg.replace(landmark_model="ann"), landmark_model=Broken(0.1, 0.02))
 
 
 def test_without_systematic_error_the_ann_filter_does_not_help(sim):
@@ -417,10 +421,10 @@ def test_without_systematic_error_the_ann_filter_does_not_help(sim):
     _, _, ts = sim
     model = ann.train(ts, ann.beacon_folds(ts)[0])
     ds = simulate.simulate(seed=1)
-    cfg = ekf_slam.SlamConfig.for_dataset("simulated")
-    from annslam_lib.map_metrics import map_errors
-    plain = map_errors(ekf_slam.run(ds, cfg).landmarks, ds.beacons)
-    with_ann = map_errors(ekf_slam.run(ds, cfg.replace(landmark_model="ann"),
+    cfg = slam_config.SlamConfig.for_dataset("simulated")
+    from annslam_lib.evaluation.map import map_errors
+    plain = map_errors(runner.run(ds, cfg).landmarks, ds.beacons)
+    with_ann = map_errors(runner.run(ds, cfg.replace(landmark_model="ann"),
                                        landmark_model=model).landmarks, ds.beacons)
     print(f"\nno bias: map RMSE plain {plain.rmse:.3f} m, ANN {with_ann.rmse:.3f} m")
     assert with_ann.rmse > 0.9 * plain.rmse

@@ -6,8 +6,10 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from annslam_lib import association
-from annslam_lib.association import NEW, REJECTED, associate, gate_threshold, mahalanobis
+
+from annslam_lib.perception.association import NEW, REJECTED, associate, gate_threshold, mahalanobis
+from annslam_lib.data import simulate
+from annslam_lib.perception import association
 
 
 def test_thresholds_are_the_chi_square_quantiles():
@@ -18,9 +20,12 @@ def test_thresholds_are_the_chi_square_quantiles():
     assert association.NEW_LANDMARK == pytest.approx(-2.0 * math.log(1e-4), rel=1e-12)  # 18.42
     assert gate_threshold(0.95, dof=1) == pytest.approx(1.959963984540054**2, rel=1e-9)
     for p, dof in ((0.99, 2), (0.9999, 2), (0.95, 3)):
-        assert gate_threshold(p, dof) == chi2.ppf(p, dof)
-    for bad in (0.0, 1.0, -0.5, True, "0.9"):
+        assert gate_threshold(p, dof) == pytest.approx(chi2.ppf(p, dof), rel=1e-12)
+    for bad in (0.0, 1.0, -0.5):
         with pytest.raises(ValueError, match="prob"):
+            gate_threshold(bad)
+    for bad in (True, "0.9"):
+        with pytest.raises(TypeError, match="prob"):
             gate_threshold(bad)
     with pytest.raises(ValueError, match="dof"):
         gate_threshold(0.9, dof=0)
@@ -171,8 +176,8 @@ def test_score_association_counts_each_outcome():
 def test_a_simulated_scan_is_associated_correctly():
     """End to end on the simulator: true pose with a known error covariance, S = H P H^T + R,
     the 99 % gate catches the true landmark of almost every detection."""
-    from annslam_lib import simulate
-    from annslam_lib.observation import observe
+    
+    from annslam_lib.models.observation import observe
 
     ds = simulate.simulate(seed=1, laps=1)
     rng = np.random.default_rng(1)
@@ -196,7 +201,7 @@ def test_a_simulated_scan_is_associated_correctly():
 
 
 def test_gate_experiment_shows_the_trade_off_of_the_gate_size():
-    from annslam_lib import simulate
+    
 
     ds = simulate.simulate(seed=3, n_beacons=60, beacon_min_sep=1.5, beacon_max_dist=10, laps=1)
     mapped = np.arange(0, 60, 2)                   # half the beacons are on the map

@@ -19,7 +19,7 @@ import pytest
 from browser_support import (ARTIFACTS, CHROMIUM_ARGS, REPO, chromium_path, serve_copy,
                              start_lab, why_no_browser)
 
-from annslam_lib.widgets.data import scan_readout, scan_scrubber, scan_summary
+from annslam_lib.chapters.ch00_course_map import scan_readout, scan_scrubber, scan_summary
 
 NOTEBOOK = REPO / "notebooks" / "00_course_map.ipynb"
 SCREENSHOT = ARTIFACTS / "scan_scrubber.png"

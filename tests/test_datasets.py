@@ -7,11 +7,13 @@ import numpy as np
 import pytest
 import scipy.io
 
-from annslam_lib import datasets, fetch
-from annslam_lib.datasets import _parse_car_park, _parse_victoria_park
-from annslam_lib.fetch import DataError
-from annslam_lib.records import SENSOR_NAMES
-from annslam_lib.vehicle import ACFR_UTE
+
+from annslam_lib.data.loaders import _parse_car_park, _parse_victoria_park
+from annslam_lib.data.fetch import DataError
+from annslam_lib.data.records import SENSOR_NAMES
+from annslam_lib.models.vehicle import ACFR_UTE
+from annslam_lib.data import fetch
+from annslam_lib.data import loaders
 
 # ---------------------------------------------------------------- Car Park
 
@@ -132,7 +134,7 @@ def test_durations(car_park, victoria_park):
 
 
 def test_loading_is_cached_read_only_and_fast(car_park, victoria_park):
-    assert datasets.load("car_park") is car_park and datasets.load_victoria_park() is victoria_park
+    assert loaders.load("car_park") is car_park and loaders.load_victoria_park() is victoria_park
     with pytest.raises(ValueError, match="read-only"):
         car_park.odometry.speed[0] = 1.0
     for parse, ds in ((_parse_car_park, car_park), (_parse_victoria_park, victoria_park)):
@@ -146,7 +148,7 @@ def test_loading_is_cached_read_only_and_fast(car_park, victoria_park):
 
 def test_unknown_dataset_lists_the_known_names():
     with pytest.raises(ValueError, match="car_park, victoria_park"):
-        datasets.load("car-park")
+        loaders.load("car-park")
 
 
 def test_corrupt_file_fails_the_hash_before_parsing(tmp_path, monkeypatch):
@@ -156,7 +158,7 @@ def test_corrupt_file_fails_the_hash_before_parsing(tmp_path, monkeypatch):
         scipy.io.savemat(folder / n, {"estbeac": np.zeros((15, 2))})  # a valid MAT file, wrong bytes
     monkeypatch.setenv("ANNSLAM_DATA", str(tmp_path))
     with pytest.raises(DataError, match="f44c8adfa7e8e38ea6c40da3cd5d52bd8e029fc2d5ea27a9d7df24ad4ec98be7"):
-        datasets.load_car_park()
+        loaders.load_car_park()
 
 
 def _car_park_files(folder, **override):

@@ -7,17 +7,18 @@ import math
 import numpy as np
 import pytest
 
-from annslam_lib import ekf_dense as d
-from annslam_lib.ekf_slam import InnovationError
-from annslam_lib.observation import inverse_observe, observe
-from annslam_lib.uncertainty import monte_carlo
-from annslam_lib.vehicle import ACFR_UTE
+
+from annslam_lib.slam.base import InnovationError
+from annslam_lib.models.observation import inverse_observe, observe
+from annslam_lib.models.uncertainty import monte_carlo
+from annslam_lib.models.vehicle import ACFR_UTE
+from annslam_lib.slam import dense
 
 
 def _filter(seed=0, N=4):
     """A dense filter with N landmarks, after a drive and an update (correlated P)."""
     rng = np.random.default_rng(seed)
-    f = d.DenseEkfSlam([1.0, -2.0, 2.9], np.diag([0.02, 0.03, 0.002]), ACFR_UTE)
+    f = dense.DenseEkfSlam([1.0, -2.0, 2.9], np.diag([0.02, 0.03, 0.002]), ACFR_UTE)
     f.augment(np.c_[rng.uniform(3, 25, N), rng.uniform(0.1, 3.0, N)], 0.1, math.radians(1))
     u = (2.0, 0.1, 0.0, 2.0 * math.tan(0.1) / ACFR_UTE.L, 0.0, 0.05, 0.0, 0.01, 0.025)
     for _ in range(20):
@@ -30,11 +31,11 @@ def test_augment_landmark_is_the_dense_filters_augment():
     x, P = f.state()
     z = np.array([[9.0, 0.7], [4.0, 3.1]])
     R = np.diag([0.1**2, math.radians(1)**2])
-    x1, P1 = d.augment_landmark(x, P, z, R)
+    x1, P1 = dense.augment_landmark(x, P, z, R)
     f.augment(z, 0.1, math.radians(1))
     np.testing.assert_allclose(x1, f.x, rtol=0, atol=1e-13)
     np.testing.assert_allclose(P1, f.P, rtol=0, atol=1e-15)
-    x2, P2 = d.augment_landmark(x, P, z[0], R)           # one landmark as (2,)
+    x2, P2 = dense.augment_landmark(x, P, z[0], R)           # one landmark as (2,)
     np.testing.assert_allclose(P2, P1[:-2, :-2], rtol=0, atol=1e-15)
 
 
@@ -45,7 +46,7 @@ def test_augmented_covariance_matches_monte_carlo():
     x, P = f.state()
     z = np.array([10.0, 1.0])
     R = np.diag([0.05**2, math.radians(0.5)**2])
-    _, P1 = d.augment_landmark(x, P, z, R)
+    _, P1 = dense.augment_landmark(x, P, z, R)
     mean = np.concatenate([x, z])
     cov = np.zeros((7, 7))
     cov[:5, :5], cov[5:, 5:] = P, R
@@ -69,19 +70,19 @@ def test_update_is_the_dense_filters_update_and_wraps():
     z = z_hat.ravel() + np.array([0.05, 0.01, -0.08, -0.02])
     z[1::2] = (z[1::2] + np.pi) % (2 * np.pi) - np.pi
     R = np.diag(np.tile([0.1**2, math.radians(1)**2], 2))
-    x1, P1 = d.range_bearing_update(x, P, z.ravel(), z_hat.ravel(), H, R)
+    x1, P1 = dense.range_bearing_update(x, P, z.ravel(), z_hat.ravel(), H, R)
     f.update(z.reshape(-1, 2), lm, 0.1, math.radians(1))
     np.testing.assert_allclose(x1, f.x, rtol=0, atol=1e-13)
     np.testing.assert_allclose(P1, f.P, rtol=0, atol=1e-15)
     # A bearing across +-pi: the innovation is the short way round.
-    nu = d.innovation([5.0, -math.pi + 0.006], [5.1, math.pi - 0.004])
+    nu = dense.innovation([5.0, -math.pi + 0.006], [5.1, math.pi - 0.004])
     np.testing.assert_allclose(nu, [-0.1, 0.01], atol=1e-12)
     # The heading after the update is wrapped into (-pi, pi].
     x_wrap = x.copy()
     x_wrap[2] = math.pi - 1e-4
-    K, _ = d.kalman_gain(P, H, R)
+    K, _ = dense.kalman_gain(P, H, R)
     push = K[2] / (K[2] @ K[2]) * 0.01                 # (K nu)[2] = +0.01
-    x2, _ = d.joseph_update(x_wrap, P, push, H, R)
+    x2, _ = dense.joseph_update(x_wrap, P, push, H, R)
     assert x2[2] == pytest.approx(-math.pi + 0.0099, abs=1e-12)
 
 
@@ -93,19 +94,19 @@ def test_joseph_form_is_the_covariance_for_any_gain():
     x, P = f.state()
     H = rng.normal(size=(2, x.size))
     R = np.diag([0.04, 0.01])
-    K_opt, S = d.kalman_gain(P, H, R)
+    K_opt, S = dense.kalman_gain(P, H, R)
     K = K_opt * 0.5 + rng.normal(scale=0.05, size=K_opt.shape)
     n = 100_000
     e = rng.multivariate_normal(np.zeros(x.size), P, n)
     v = rng.multivariate_normal(np.zeros(2), R, n)
     after = e - (e @ H.T + v) @ K.T
     C = np.cov(after, rowvar=False)
-    J = d.joseph_covariance(P, H, R, K)
+    J = dense.joseph_covariance(P, H, R, K)
     scale = np.sqrt(np.outer(np.diag(J), np.diag(J)))
     assert np.max(np.abs(C - J) / scale) < 0.02
     short = (np.eye(x.size) - K @ H) @ P
     assert np.max(np.abs(short - J) / scale) > 0.1 and np.max(np.abs(short - short.T)) > 1e-4
-    J_opt = d.joseph_covariance(P, H, R, K_opt)
+    J_opt = dense.joseph_covariance(P, H, R, K_opt)
     np.testing.assert_allclose((np.eye(x.size) - K_opt @ H) @ P, J_opt, atol=1e-14)
     np.testing.assert_allclose(P - K_opt @ S @ K_opt.T, J_opt, atol=1e-14)
     # the optimal gain gives the smallest trace
@@ -119,12 +120,12 @@ def test_singular_innovation_covariance_is_an_innovation_error():
     H = np.zeros((2, x.size))
     H[:, :3], H[:, 3:5] = Hp, Hl
     with pytest.raises(InnovationError, match="singular"):
-        d.kalman_gain(np.zeros_like(P), H, np.zeros((2, 2)))
+        dense.kalman_gain(np.zeros_like(P), H, np.zeros((2, 2)))
     b = np.arange(1.0, x.size + 1)[:, None] * 0.1
     with pytest.raises(ValueError, match="no Kalman gain"):            # rank 1, not exact
-        d.range_bearing_update(x, b @ b.T, z_hat, z_hat, H, np.zeros((2, 2)))
+        dense.range_bearing_update(x, b @ b.T, z_hat, z_hat, H, np.zeros((2, 2)))
     with pytest.raises(ValueError, match="singular"):
-        d.joseph_update(x, P, [0.0, 0.0, 0.0, 0.0], np.vstack([H, H]), np.zeros((4, 4)))
+        dense.joseph_update(x, P, [0.0, 0.0, 0.0, 0.0], np.vstack([H, H]), np.zeros((4, 4)))
 
 
 def test_bad_input_is_a_clear_error():
@@ -132,20 +133,20 @@ def test_bad_input_is_a_clear_error():
     x, P = f.state()
     R = np.eye(2) * 0.01
     with pytest.raises(ValueError, match="size 3 \\+ 2N"):
-        d.augment_landmark(x[:-1], P[:-1, :-1], [5.0, 1.0], R)
+        dense.augment_landmark(x[:-1], P[:-1, :-1], [5.0, 1.0], R)
     with pytest.raises(ValueError, match="P must be 11 x 11"):
-        d.augment_landmark(x, P[:-2, :-2], [5.0, 1.0], R)
+        dense.augment_landmark(x, P[:-2, :-2], [5.0, 1.0], R)
     with pytest.raises(ValueError, match="range must be > 0"):
-        d.augment_landmark(x, P, [0.0, 1.0], R)
+        dense.augment_landmark(x, P, [0.0, 1.0], R)
     with pytest.raises(ValueError, match="R must be the 2 x 2"):
-        d.augment_landmark(x, P, [5.0, 1.0], np.eye(3))
+        dense.augment_landmark(x, P, [5.0, 1.0], np.eye(3))
     with pytest.raises(ValueError, match="H must be"):
-        d.joseph_update(x, P, [0.1, 0.0], np.zeros((2, 5)), R)
+        dense.joseph_update(x, P, [0.1, 0.0], np.zeros((2, 5)), R)
     with pytest.raises(ValueError, match="nu has 3 entries"):
-        d.joseph_update(x, P, [0.1, 0.0, 0.0], np.eye(2, x.size), R)
+        dense.joseph_update(x, P, [0.1, 0.0, 0.0], np.eye(2, x.size), R)
     with pytest.raises(ValueError, match="K must be"):
-        d.joseph_covariance(P, np.eye(2, x.size), R, np.zeros((2, x.size)))
+        dense.joseph_covariance(P, np.eye(2, x.size), R, np.zeros((2, x.size)))
     with pytest.raises(ValueError, match="same \\(range, bearing\\) pairs"):
-        d.innovation([1.0, 0.0], [1.0, 0.0, 2.0, 0.0])
+        dense.innovation([1.0, 0.0], [1.0, 0.0, 2.0, 0.0])
     with pytest.raises(ValueError, match="NaN"):
-        d.joseph_covariance(P, np.eye(2, x.size), [[np.nan, 0], [0, 1]], np.zeros((x.size, 2)))
+        dense.joseph_covariance(P, np.eye(2, x.size), [[np.nan, 0], [0, 1]], np.zeros((x.size, 2)))

@@ -7,12 +7,22 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from annslam_lib import association, ekf_slam, kinematics, map_metrics, metrics, simulate
-from annslam_lib.ekf_dense import DenseEkfSlam
-from annslam_lib.ekf_slam import EkfSlam, InnovationError, SlamConfig
-from annslam_lib.observation import observe
-from annslam_lib.records import Odometry
-from annslam_lib.vehicle import ACFR_UTE
+
+from annslam_lib.slam.dense import DenseEkfSlam
+from annslam_lib.slam.efficient import EkfSlam
+from annslam_lib.slam.base import InnovationError
+from annslam_lib.slam.config import SlamConfig
+from annslam_lib.models.observation import observe
+from annslam_lib.data.records import Odometry
+from annslam_lib.models.vehicle import ACFR_UTE
+from annslam_lib.data import simulate
+from annslam_lib.evaluation import consistency
+from annslam_lib.evaluation import map as map_eval
+from annslam_lib.evaluation import trajectory
+from annslam_lib.models import motion
+from annslam_lib.perception import association
+from annslam_lib.slam import runner
+from annslam_lib.slam import threads
 
 
 @pytest.fixture(scope="module")
@@ -41,7 +51,7 @@ def _controls(n=40, seed=1):
     rng = np.random.default_rng(seed)
     odo = Odometry(t=np.cumsum(np.full(n, 0.025)), speed=rng.uniform(1.0, 3.0, n),
                    steering=rng.uniform(-0.4, 0.4, n))
-    return ekf_slam.control_table(odo, ACFR_UTE, 0.7, math.radians(7))
+    return motion.control_table(odo, ACFR_UTE, 0.7, math.radians(7))
 
 
 # --------------------------------------------------------------------------- the models
@@ -52,7 +62,7 @@ def test_scalar_predict_is_kinematics_predict():
     f = EkfSlam([2.0, 1.0, 3.1], np.diag([0.01, 0.02, 0.003]), ACFR_UTE)
     u = _controls()[5]
     dt = 0.0137
-    pose, F, G = kinematics.predict(np.array([2.0, 1.0, 3.1]), np.array(u[:2]), dt, ACFR_UTE)
+    pose, F, G = motion.predict(np.array([2.0, 1.0, 3.1]), np.array(u[:2]), dt, ACFR_UTE)
     P = np.diag([0.01, 0.02, 0.003])
     Q = np.array([[u[5], u[6]], [u[6], u[7]]])
     f.predict(u, dt)
@@ -62,8 +72,8 @@ def test_scalar_predict_is_kinematics_predict():
 
 def test_control_noise_maps_encoder_noise_through_axle_speed():
     odo = Odometry(t=[0.0, 0.025], speed=[2.0, 2.0], steering=[0.3, 0.3])
-    u = ekf_slam.control_table(odo, ACFR_UTE, 0.7, 0.1)[0]
-    _, J = kinematics.axle_speed(2.0, 0.3, ACFR_UTE)
+    u = motion.control_table(odo, ACFR_UTE, 0.7, 0.1)[0]
+    _, J = motion.axle_speed(2.0, 0.3, ACFR_UTE)
     M = np.array([[J[0], J[1]], [0.0, 1.0]])
     Qc = M @ np.diag([0.7**2, 0.1**2]) @ M.T
     np.testing.assert_allclose([u[5], u[6], u[7]], [Qc[0, 0], Qc[0, 1], Qc[1, 1]], rtol=1e-14)
@@ -159,11 +169,11 @@ def test_fast_gating_helpers_equal_association_module():
     zhat, S = eff.observation_model(0.1, 0.02)
     rng = np.random.default_rng(5)
     z = np.column_stack([rng.uniform(1, 30, 9), rng.uniform(-0.2, 3.3, 9)])
-    np.testing.assert_allclose(ekf_slam._mahalanobis(z, zhat, S),
+    np.testing.assert_allclose(association.mahalanobis_fast(z, zhat, S),
                                association.mahalanobis(z, zhat, S), rtol=1e-12)
     for trial in range(300):
         d2 = rng.exponential(8.0, size=(rng.integers(1, 6), rng.integers(1, 6)))
-        np.testing.assert_array_equal(ekf_slam._associate(d2, 9.21, 18.4),
+        np.testing.assert_array_equal(association.associate_fast(d2, 9.21, 18.4),
                                       association.associate(d2, 9.21, 18.4))
 
 
@@ -179,8 +189,8 @@ def test_efficient_run_equals_dense_reference(sim_short, overrides):
     """The whole seeded run, efficient vs textbook dense: same decisions, same numbers
     to 1e-9 (GPS updates, tentative landmarks deleted, both motion models included)."""
     cfg = SlamConfig.for_dataset("simulated", **overrides)
-    eff = ekf_slam.run(sim_short, cfg, progress=False)
-    ref = ekf_slam.run(sim_short, cfg, progress=False, backend="dense")
+    eff = runner.run(sim_short, cfg, progress=False)
+    ref = runner.run(sim_short, cfg, progress=False, backend="dense")
     assert eff.counts == ref.counts
     if overrides["association"] == "truth":
         assert eff.counts["landmarks_removed"] >= 1
@@ -195,7 +205,7 @@ def test_efficient_run_equals_dense_reference(sim_short, overrides):
 
 
 def test_result_bookkeeping_on_simulation(sim_short):
-    r = ekf_slam.run(sim_short, SlamConfig.for_dataset("simulated"), progress=False)
+    r = runner.run(sim_short, SlamConfig.for_dataset("simulated"), progress=False)
     log, c = r.observations, r.counts
     assert len(log) == c["observations"] == sim_short.detections.count
     assert c["associated"] + c["new"] + c["rejected"] + c["out_of_range"] == c["observations"]
@@ -228,9 +238,9 @@ def test_nees_and_nis_inside_chi_square_bands():
     nees, nis, dof = [], [], []
     for seed in range(n_runs):
         ds = simulate.simulate(seed=100 + seed, raw_laser=False)
-        r = ekf_slam.run(ds, cfg, progress=False)
+        r = runner.run(ds, cfg, progress=False)
         assert r.counts["landmarks"] == 15
-        nees.append(ekf_slam.pose_nees(r, ds))
+        nees.append(consistency.pose_nees(r, ds))
         k = r.nis["kind"] == 0
         row, d = np.zeros(len(ds.detections)), np.zeros(len(ds.detections))
         row[r.nis["scan"][k]], d[r.nis["scan"][k]] = r.nis["nis"][k], r.nis["dof"][k]
@@ -253,14 +263,14 @@ def test_car_park_targets(car_park):
     """Default configuration: all 15 surveyed beacons mapped once, nothing spurious, map
     RMSE <= 0.05 m after the best rigid alignment and <= 0.15 m as mapped, trajectory
     RMSE against GPS <= 0.6 m, covariance symmetric PSD."""
-    r = ekf_slam.run(car_park, progress=False)
+    r = runner.run(car_park, progress=False)
     assert r.config == SlamConfig.for_dataset("car_park")
-    m = map_metrics.map_errors(r.landmarks, car_park.beacons, max_distance=1.0)
+    m = map_eval.map_errors(r.landmarks, car_park.beacons, max_distance=1.0)
     assert r.counts["landmarks"] == 15
     assert m.missed == 0 and m.spurious == 0 and m.duplicates == 0
     assert m.rmse_aligned <= 0.05, m.summary()
     assert m.rmse <= 0.15, m.summary()
-    e = metrics.trajectory_errors(r.odometry_trajectory, car_park.gps)
+    e = trajectory.trajectory_errors(r.odometry_trajectory, car_park.gps)
     assert e.rmse <= 0.6, e.summary()
     assert np.all(r.health["min_eig"] >= -1e-9)
     # the start did not need a hand-tuned heading: fitted to GPS, ~127 deg from East
@@ -271,7 +281,7 @@ def test_car_park_targets(car_park):
 @pytest.fixture(scope="module")
 def victoria_run(victoria_park):
     """The whole Victoria Park run, once (about 4 s; benchmarks/bench_ekf_slam.py times it)."""
-    return ekf_slam.run(victoria_park, progress=False)
+    return runner.run(victoria_park, progress=False)
 
 
 def test_victoria_park_covariance_healthy_at_every_checkpoint(victoria_park, victoria_run):
@@ -285,7 +295,7 @@ def test_victoria_park_covariance_healthy_at_every_checkpoint(victoria_park, vic
     assert r.counts["scans"] >= 7200 and r.counts["predicts"] > 60000
     assert 200 <= r.counts["landmarks"] <= 500
     assert r.counts["landmarks_removed"] > 0            # tentative trees were dropped
-    e = metrics.trajectory_errors(r.odometry_trajectory, victoria_park.gps)
+    e = trajectory.trajectory_errors(r.odometry_trajectory, victoria_park.gps)
     assert np.median(e.error) < 2.5, e.summary()
 
 
@@ -293,9 +303,9 @@ def test_victoria_park_covariance_healthy_at_every_checkpoint(victoria_park, vic
 
 def test_unknown_dataset_name():
     with pytest.raises(ValueError, match="unknown dataset 'parking_lot'"):
-        ekf_slam.run("parking_lot", progress=False)
-    with pytest.raises(ValueError, match="records.Dataset"):
-        ekf_slam.run(42, progress=False)
+        runner.run("parking_lot", progress=False)
+    with pytest.raises(TypeError, match="records.Dataset"):
+        runner.run(42, progress=False)
 
 
 @pytest.mark.parametrize("field, value", [
@@ -324,14 +334,14 @@ def test_config_defaults_and_unknown_names():
 
 
 def test_bad_run_arguments(sim_short, car_park):
-    with pytest.raises(ValueError, match="config must be a SlamConfig"):
-        ekf_slam.run(sim_short, {"sigma_range": 0.1}, progress=False)
+    with pytest.raises(TypeError, match="config must be a SlamConfig"):
+        runner.run(sim_short, {"sigma_range": 0.1}, progress=False)
     with pytest.raises(ValueError, match="backend"):
-        ekf_slam.run(sim_short, progress=False, backend="gpu")
+        runner.run(sim_short, progress=False, backend="gpu")
     with pytest.raises(ValueError, match="true landmark ids"):
-        ekf_slam.run(car_park, SlamConfig(association="truth"), progress=False)
+        runner.run(car_park, SlamConfig(association="truth"), progress=False)
     with pytest.raises(ValueError, match="initial_pose = 'truth'"):
-        ekf_slam.run(car_park, SlamConfig(initial_pose="truth"), progress=False)
+        runner.run(car_park, SlamConfig(initial_pose="truth"), progress=False)
 
 
 def test_nan_state_is_rejected():
@@ -358,12 +368,10 @@ def test_singular_innovation_covariance_is_a_clear_error():
 
 
 def test_progress_bar_and_explicit_initial_pose(sim_short):
-    assert ekf_slam._progress(None, 10**6) is None       # pytest's stderr is not a TTY
-    assert ekf_slam._progress(False, 10**6) is None
     cfg = SlamConfig.for_dataset("simulated")
-    quiet = ekf_slam.run(sim_short, cfg, progress=False)
+    quiet = runner.run(sim_short, cfg, progress=False)
     pose0 = tuple(sim_short.truth.poses[0, 1:])
-    shown = ekf_slam.run(sim_short, cfg.replace(initial_pose=pose0), progress=True)
+    shown = runner.run(sim_short, cfg.replace(initial_pose=pose0), progress=True)
     assert shown.initial_info["policy"] == "given"
     np.testing.assert_array_equal(shown.trajectory, quiet.trajectory)
 
@@ -371,16 +379,16 @@ def test_progress_bar_and_explicit_initial_pose(sim_short):
 def test_gating_rejects_a_non_positive_definite_innovation_covariance():
     S = np.array([[[1.0, 0.0], [0.0, 1.0]], [[1.0, 2.0], [2.0, 1.0]]])
     with pytest.raises(ValueError, match="landmark 1 is not positive definite"):
-        ekf_slam._mahalanobis(np.array([[5.0, 1.0]]), np.array([[5.0, 1.0], [6.0, 1.2]]), S)
+        association.mahalanobis_fast(np.array([[5.0, 1.0]]), np.array([[5.0, 1.0], [6.0, 1.2]]), S)
 
 
 def test_run_uses_one_blas_thread_and_restores_the_setting():
     """With two BLAS threads and a busy machine a Victoria Park run took 54 s instead of
     4 s: ``run`` limits BLAS to one thread while it runs, whatever OMP_NUM_THREADS says."""
-    controls = ekf_slam._openblas_thread_controls()
+    controls = threads.openblas_thread_controls()
     if not controls:
         pytest.skip("no OpenBLAS thread control found in this process")
     before = [get() for _, get in controls]
-    with ekf_slam.one_blas_thread():
+    with threads.one_blas_thread():
         assert [get() for _, get in controls] == [1] * len(controls)
     assert [get() for _, get in controls] == before

@@ -3,7 +3,7 @@ import re
 from importlib import metadata
 from pathlib import Path
 
-import pytest
+import torch
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -56,7 +56,6 @@ def test_linux_pins_the_cpu_build_and_macos_the_pypi_wheel():
 
 
 def test_torch_is_the_cpu_build_without_cuda_packages():
-    torch = pytest.importorskip("torch")
     assert torch.version.cuda is None, f"torch {torch.__version__} is a CUDA build"
     names = [(d.metadata["Name"] or "").lower() for d in metadata.distributions()]
     cuda = sorted(n for n in names if n.startswith(("nvidia-", "triton")))

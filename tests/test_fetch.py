@@ -14,10 +14,12 @@ from pathlib import Path
 import platformdirs
 import pytest
 
-from annslam_lib import fetch, registry
-from annslam_lib.__main__ import main
-from annslam_lib.fetch import DataError
-from annslam_lib.registry import DataFile, DatasetEntry
+
+from annslam_lib.course.cli import main
+from annslam_lib.data.fetch import DataError
+from annslam_lib.data.registry import DataFile, DatasetEntry
+from annslam_lib.data import fetch
+from annslam_lib.data import registry
 
 GOOD = b"annslam test payload\n" * 500
 SHA = hashlib.sha256(GOOD).hexdigest()

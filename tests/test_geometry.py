@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from annslam_lib.geometry import wrap_angle
+from annslam_lib.models.geometry import wrap_angle
 
 
 def test_wrap_angle_range_and_equivalence():

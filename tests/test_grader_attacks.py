@@ -18,9 +18,10 @@ from pathlib import Path
 import nbformat
 import pytest
 
-from annslam_lib import fetch
+
 from annslam_lib.course.grader import grade_batch, grade_submission
 from annslam_lib.course.sandbox import Limits, bwrap_available, nobody_available
+from annslam_lib.data import fetch
 
 import grading_support as gs
 
@@ -303,10 +304,10 @@ def test_the_sandbox_hides_the_instructor_notebook_and_has_no_network(instructor
 
 SHORTCUTS = {
     "attribute call": "def my_observe(pose, landmark):\n    return observation.observe(pose, landmark)[0]",
-    "imported alias": ("from annslam_lib.observation import observe as o\n"
+    "imported alias": ("from annslam_lib.models.observation import observe as o\n"
                        "def my_observe(pose, landmark):\n    return o(pose, landmark)[0]"),
     "hidden by getattr": ("def my_observe(pose, landmark):\n"
-                          "    m = __import__('annslam_lib.observation', fromlist=['x'])\n"
+                          "    m = __import__('annslam_lib.models.observation', fromlist=['x'])\n"
                           "    return getattr(m, 'obs' + 'erve')(pose, landmark)[0]"),
 }
 
@@ -317,7 +318,7 @@ def test_calling_the_library_instead_of_writing_it_scores_zero(how, instructor, 
     g = grade(gs.submission(SHORTCUTS[how], gs.SPEED_BODY), instructor, tmp_path)
     r = by_id(g)["ex-observe-tests"]
     assert r.points == 0 and r.status in ("forbidden", "failed")
-    assert "my_observe calls annslam_lib.observation.observe: write it yourself" in r.message
+    assert "my_observe calls annslam_lib.models.observation.observe: write it yourself" in r.message
     assert by_id(g)["ex-speed-tests"].points == gs.POINTS["ex-speed-tests"]
 
 
@@ -359,7 +360,7 @@ def test_a_batch_grades_everything_it_can_and_reports_the_rest(instructor, tmp_p
 
 
 def test_the_grade_command_exit_code_and_json(instructor, tmp_path, course_files):
-    from annslam_lib.__main__ import main
+    from annslam_lib.course.cli import main
 
     gs.write(gs.honest(), tmp_path / "a" / "chapter.ipynb")
     (tmp_path / "b").mkdir()

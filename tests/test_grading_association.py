@@ -8,10 +8,12 @@ import pytest
 from scipy.optimize import linear_sum_assignment
 from scipy.stats import chi2
 
-from annslam_lib import association
-from annslam_lib.association import NEW, REJECTED
+
+from annslam_lib.perception.association import NEW, REJECTED
 from annslam_lib.grading import GradingError
 from annslam_lib.grading import association as gk
+from annslam_lib.perception import association
+from solutions import solution
 
 
 def quiet(check, fn, **kw):
@@ -28,31 +30,9 @@ def wrap(a):
 
 # ----------------------------------------------------------------------- the notebook's solutions
 
-def nb_d2(z, zhat, H, P, R):
-    nu = np.array([z[0] - zhat[0], (z[1] - zhat[1] + np.pi) % (2 * np.pi) - np.pi])
-    S = H @ P @ H.T + R
-    eig = np.linalg.eigvalsh(S)
-    if not eig[0] > 1e-12 * abs(eig[-1]):
-        raise ValueError(f"S is not positive definite (eigenvalues {eig[0]:.3g}, {eig[1]:.3g})")
-    return float(nu @ np.linalg.solve(S, nu))
-
-
-def nb_in_gate(d2, prob=0.99):
-    return bool(d2 <= chi2.ppf(prob, 2))
-
-
-def nb_associate(d2, gate, new_landmark):
-    n, m = d2.shape
-    if m == 0:
-        return np.full(n, NEW)
-    assign = np.where(d2.min(axis=1) > new_landmark, NEW, REJECTED)
-    candidates = sorted((d2[i, j], i, j) for i, j in zip(*np.nonzero(d2 <= gate)))
-    taken = set()
-    for _, i, j in candidates:
-        if assign[i] < 0 and j not in taken:
-            assign[i] = j
-            taken.add(j)
-    return assign
+nb_d2 = solution("04", "my_innovation_d2")
+nb_in_gate = solution("04", "my_in_gate")
+nb_associate = solution("04", "my_associate")
 
 
 def lib_d2(z, zhat, H, P, R):

@@ -2,9 +2,10 @@
 import numpy as np
 import pytest
 
-from annslam_lib import observation
+
 from annslam_lib.grading import (NOT_WRITTEN, GradingError, Mistake, check_function,
                                  check_jacobian, check_raises, fmt)
+from annslam_lib.models import observation
 
 RNG = np.random.default_rng(0)
 CASES = [(RNG.uniform(-10, 10, 3) * [1, 1, 0.3], RNG.uniform(-20, 20, 2)) for _ in range(40)]

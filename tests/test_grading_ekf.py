@@ -6,45 +6,20 @@ import math
 import numpy as np
 import pytest
 
-from annslam_lib import ekf_dense, paper
+from annslam_lib import paper
 from annslam_lib.grading import NOT_WRITTEN, GradingError
 from annslam_lib.grading import ekf as gk
-from annslam_lib.observation import inverse_observe
+from annslam_lib.models.observation import inverse_observe
+from annslam_lib.slam import dense
+from solutions import solution
 
 
 # ---------------------------------------------------------------- the notebook's solutions
 # (the same code as the solution cells of notebooks/05_ekf_slam.ipynb)
 
-def my_augment(x, P, z, R):
-    lm, Gv, Gz = inverse_observe(x[:3], z)
-    n = x.size
-    x_new = np.concatenate([x, lm])
-    P_new = np.zeros((n + 2, n + 2))
-    P_new[:n, :n] = P
-    cross = Gv @ P[:3, :]                        # G_v P_{v,:}: (2, n)
-    P_new[n:, :n] = cross
-    P_new[:n, n:] = cross.T
-    P_new[n:, n:] = Gv @ P[:3, :3] @ Gv.T + Gz @ R @ Gz.T
-    return x_new, P_new
-
-
-def my_joseph_covariance(P, H, R, K):
-    I_KH = np.eye(P.shape[0]) - K @ H
-    return I_KH @ P @ I_KH.T + K @ R @ K.T
-
-
-def my_ekf_update(x, P, z, z_hat, H, R):
-    S = H @ P @ H.T + R
-    eig = np.linalg.eigvalsh(S)
-    if eig[0] <= 1e-12 * abs(eig[-1]):
-        raise ValueError(f"innovation covariance S is singular (eigenvalues {eig})")
-    K = P @ H.T @ np.linalg.inv(S)
-    nu = z - z_hat
-    nu[1::2] = (nu[1::2] + np.pi) % (2 * np.pi) - np.pi
-    x_new = x + K @ nu
-    x_new[2] = (x_new[2] + np.pi) % (2 * np.pi) - np.pi
-    I_KH = np.eye(x.size) - K @ H
-    return x_new, I_KH @ P @ I_KH.T + K @ R @ K.T
+my_augment = solution("05", "my_augment")
+my_joseph_covariance = solution("05", "my_joseph_covariance")
+my_ekf_update = solution("05", "my_ekf_update")
 
 
 def stub(*args):
@@ -54,11 +29,11 @@ def stub(*args):
 # ---------------------------------------------------------------- (a) right answers pass
 
 @pytest.mark.parametrize("check, fn", [
-    (gk.check_augment, ekf_dense.augment_landmark),
+    (gk.check_augment, dense.augment_landmark),
     (gk.check_augment, my_augment),
-    (gk.check_joseph_covariance, ekf_dense.joseph_covariance),
+    (gk.check_joseph_covariance, dense.joseph_covariance),
     (gk.check_joseph_covariance, my_joseph_covariance),
-    (gk.check_ekf_update, ekf_dense.range_bearing_update),
+    (gk.check_ekf_update, dense.range_bearing_update),
     (gk.check_ekf_update, my_ekf_update),
 ])
 def test_references_and_solutions_pass(check, fn, capsys):
@@ -77,7 +52,7 @@ def test_cases_are_realistic_and_cover_the_edges():
     for x, P, z, z_hat, H, R in upd.values():
         assert np.all(np.linalg.eigvalsh(P) > 0) and H.shape == (z.size, x.size)
         wrapped += np.any(np.abs(z[1::2] - z_hat[1::2]) > math.pi)
-        x_new, _ = ekf_dense.range_bearing_update(x, P, z, z_hat, H, R)
+        x_new, _ = dense.range_bearing_update(x, P, z, z_hat, H, R)
         assert -math.pi < x_new[2] <= math.pi
     assert wrapped >= 2                           # cases where z - z_hat needs the wrap
     assert any(args[0].size >= 23 for args in upd.values())
@@ -92,7 +67,7 @@ def test_the_papers_printed_bearing_fails_augmentation():
     """Placing the landmark along the printed bearing's vector (landmark -> sensor, erratum
     4.1-bearing) is consistent with the PRINTED observation model but mirrored."""
     def printed_augment(x, P, z, R):
-        x_new, P_new = ekf_dense.augment_landmark(x, P, z, R)
+        x_new, P_new = dense.augment_landmark(x, P, z, R)
         x_new[-2:] = 2 * x[:2] - x_new[-2:]        # the mirror through the laser
         return x_new, P_new
 
@@ -181,7 +156,7 @@ def test_short_form_is_right_for_the_optimal_gain_only():
     optimal = {lab: a for lab, a in gk._joseph_cases(0, 0).items() if "optimal gain" in lab}
     for P, H, R, K in optimal.values():
         np.testing.assert_allclose(_joseph_variant("short")(P, H, R, K),
-                                   ekf_dense.joseph_covariance(P, H, R, K), atol=1e-15)
+                                   dense.joseph_covariance(P, H, R, K), atol=1e-15)
 
 
 def _update_variant(kind):
@@ -231,7 +206,7 @@ def test_a_singular_innovation_covariance_must_raise():
     def inv_based(x, P, z, z_hat, H, R):
         S = H @ P @ H.T + R
         K = P @ H.T @ np.linalg.inv(S)
-        nu = ekf_dense.innovation(z, z_hat)
+        nu = dense.innovation(z, z_hat)
         x_new = x + K @ nu
         x_new[2] = (x_new[2] + np.pi) % (2 * np.pi) - np.pi
         return x_new, my_joseph_covariance(P, H, R, K)

@@ -6,10 +6,12 @@ import re
 import numpy as np
 import pytest
 
-from annslam_lib import kinematics, paper
+from annslam_lib import paper
 from annslam_lib.grading import NOT_WRITTEN, GradingError
 from annslam_lib.grading import kinematics as gk
-from annslam_lib.vehicle import Vehicle
+from annslam_lib.models.vehicle import Vehicle
+from annslam_lib.models import motion
+from solutions import solution
 
 
 def car(L=2.83, a=3.78, b=0.5, H=0.76):
@@ -26,59 +28,14 @@ def fails(check, fn, *phrases, **kwargs):
     return msg
 
 
-# ---------------------------------------------------- the notebooks' solutions (copied verbatim)
+# ---------------------------------------------------- the notebooks' own solutions
 
-def my_axle_speed(v_e, alpha, H, L):
-    return v_e / (1.0 - np.tan(alpha) * H / L)
-
-
-def my_euler_step(pose, control, dt, L, a, b):
-    x, y, phi = pose
-    v, alpha = control
-    w = v * np.tan(alpha) / L
-    x_dot = v * np.cos(phi) - w * (a * np.sin(phi) + b * np.cos(phi))
-    y_dot = v * np.sin(phi) + w * (a * np.cos(phi) - b * np.sin(phi))
-    phi_k = (phi + dt * w + np.pi) % (2 * np.pi) - np.pi
-    return np.array([x + dt * x_dot, y + dt * y_dot, phi_k])
-
-
-def my_process_jacobians(pose, control, dt, L, a, b):
-    phi = pose[2]
-    v, alpha = control
-    c, s, t = np.cos(phi), np.sin(phi), np.tan(alpha)
-    w = v * t / L
-    lx = a * s + b * c                 # x_dot = v c - w lx
-    ly = a * c - b * s                 # y_dot = v s + w ly
-    F = np.eye(3)
-    F[0, 2] = -dt * (v * s + w * ly)
-    F[1, 2] = dt * (v * c - w * lx)
-    dw = v * (1 + t**2) / L            # d omega / d alpha
-    G = dt * np.array([[c - t / L * lx, -dw * lx],
-                       [s + t / L * ly, dw * ly],
-                       [t / L, dw]])
-    return F, G
-
-
-def my_laser_pose(axle_pose, a, b):
-    x, y, phi = axle_pose
-    return np.array([x + a * np.cos(phi) - b * np.sin(phi),
-                     y + a * np.sin(phi) + b * np.cos(phi), phi])
-
-
-def my_laser_velocity(pose, control, L, a, b):
-    phi = pose[2]
-    v, alpha = control
-    w = v * np.tan(alpha) / L
-    return np.array([v * np.cos(phi) - w * (a * np.sin(phi) + b * np.cos(phi)),
-                     v * np.sin(phi) + w * (a * np.cos(phi) - b * np.sin(phi)), w])
-
-
-def my_laser_pose_jacobian(axle_pose, a, b):
-    phi = axle_pose[2]
-    J = np.eye(3)
-    J[0, 2] = -a * np.sin(phi) - b * np.cos(phi)
-    J[1, 2] = a * np.cos(phi) - b * np.sin(phi)
-    return J
+my_axle_speed = solution("01", "my_axle_speed")
+my_euler_step = solution("01", "my_euler_step")
+my_process_jacobians = solution("01", "my_process_jacobians")
+my_laser_pose = solution("02", "my_laser_pose")
+my_laser_velocity = solution("02", "my_laser_velocity")
+my_laser_pose_jacobian = solution("02", "my_laser_pose_jacobian")
 
 
 SOLUTIONS = [(gk.check_axle_speed, my_axle_speed), (gk.check_euler_step, my_euler_step),
@@ -90,27 +47,27 @@ SOLUTIONS = [(gk.check_axle_speed, my_axle_speed), (gk.check_euler_step, my_eule
 # ---------------------------------------------------- library wrapped in the student signatures
 
 def lib_axle_speed(v_e, alpha, H, L):
-    return kinematics.axle_speed(v_e, alpha, car(L=L, H=H))[0]
+    return motion.axle_speed(v_e, alpha, car(L=L, H=H))[0]
 
 
 def lib_step(pose, control, dt, L, a, b):
-    return kinematics.predict(pose, control, dt, car(L, a, b))[0]
+    return motion.predict(pose, control, dt, car(L, a, b))[0]
 
 
 def lib_fg(pose, control, dt, L, a, b):
-    return kinematics.predict(pose, control, dt, car(L, a, b))[1:]
+    return motion.predict(pose, control, dt, car(L, a, b))[1:]
 
 
 def lib_laser_pose(p, a, b):
-    return kinematics.laser_pose(p, car(a=a, b=b))[0]
+    return motion.laser_pose(p, car(a=a, b=b))[0]
 
 
 def lib_velocity(pose, control, L, a, b):
-    return kinematics.laser_velocity(pose, control, car(L, a, b))
+    return motion.laser_velocity(pose, control, car(L, a, b))
 
 
 def lib_jac(p, a, b):
-    return kinematics.laser_pose(p, car(a=a, b=b))[1]
+    return motion.laser_pose(p, car(a=a, b=b))[1]
 
 
 LIBRARY = [(gk.check_axle_speed, lib_axle_speed), (gk.check_euler_step, lib_step),
@@ -131,9 +88,9 @@ def test_right_answers_pass_visible_and_hidden_cases(check, fn, capsys):
 
 def test_success_message_is_deterministic_and_counts_the_cases():
     assert gk.check_axle_speed(my_axle_speed) == \
-        "✓ my_axle_speed agrees with kinematics.axle_speed on 45 inputs."
+        "✓ my_axle_speed agrees with motion.axle_speed on 45 inputs."
     assert gk.check_process_jacobians(my_process_jacobians, n=10) == \
-        "✓ my_process_jacobians: F and G agree with kinematics.predict on 19 inputs."
+        "✓ my_process_jacobians: F and G agree with motion.predict on 19 inputs."
 
 
 def test_a_student_function_that_edits_its_input_in_place_is_graded_on_clean_inputs():
@@ -159,7 +116,7 @@ def test_printed_discrete_model_fails_the_euler_step_naming_its_errata(inside, r
 def test_jacobians_of_the_printed_discrete_model_fail(inside):
     def printed_fg(pose, u, dt, L, a, b):
         veh = car(L, a, b)
-        from annslam_lib.geometry import numerical_jacobian
+        from annslam_lib.models.geometry import numerical_jacobian
         f = lambda p, w: paper.discrete_model_printed(p, w, dt, veh, tan_inside=inside)  # noqa: E731
         return (numerical_jacobian(lambda p: f(p, u), pose, angle_outputs=[2]),
                 numerical_jacobian(lambda w: f(pose, w), u, angle_outputs=[2]))
@@ -259,7 +216,7 @@ def test_axle_speed_mistakes(wrong, phrase):
 
 def test_euler_step_mistakes():
     fails(gk.check_euler_step,
-          lambda p, u, dt, L, a, b: kinematics.predict_exact(p, u, dt, car(L, a, b)),
+          lambda p, u, dt, L, a, b: motion.predict_exact(p, u, dt, car(L, a, b)),
           "exact circular arc", "EULER step")
     fails(gk.check_euler_step, lambda p, u, dt, L, a, b: np.r_[lib_step(p, u, dt, L, a, b)[:2], p[2]],
           "leaves the heading unchanged")
@@ -345,7 +302,7 @@ def test_laser_velocity_mistakes():
 
 
 @pytest.mark.parametrize("wrong,phrase", [
-    (lambda p, a, b: kinematics.axle_pose(p, car(a=a, b=b))[1], "Jacobian of the inverse"),
+    (lambda p, a, b: motion.axle_pose(p, car(a=a, b=b))[1], "Jacobian of the inverse"),
     (lambda p, a, b: lib_jac(p, a, b) - np.eye(3), "the diagonal is missing"),
     (lambda p, a, b: lib_jac(p, a, b).T, "transpose"),
     (lambda p, a, b: lib_jac(p, a, b) * np.r_[1.0, 1.0, 0.0][:, None],

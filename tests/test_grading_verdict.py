@@ -9,34 +9,20 @@ import math
 import numpy as np
 import pytest
 
-from annslam_lib import map_metrics, paper
+from annslam_lib import paper
 from annslam_lib.grading import GradingError
 from annslam_lib.grading import verdict as gv
-from annslam_lib.map_metrics import rigid_align
+from annslam_lib.evaluation import map as map_eval
+from solutions import solution
 
 
 def stub(*args):
     raise NotImplementedError()
 
 
-def notebook_rigid_align(a, b):
-    a_bar, b_bar = a.mean(axis=0), b.mean(axis=0)
-    U, _, Vt = np.linalg.svd((a - a_bar).T @ (b - b_bar))
-    d = np.sign(np.linalg.det(Vt.T @ U.T))
-    R = Vt.T @ np.diag([1.0, d]) @ U.T
-    return R, b_bar - R @ a_bar
-
-
-def notebook_aligned_rmse(mapped, true):
-    R, t = rigid_align(mapped, true)
-    d = mapped @ R.T + t - true
-    return float(np.sqrt(np.mean(np.sum(d * d, axis=1))))
-
-
-def notebook_regression(outputs, targets):
-    o, g = np.ravel(outputs), np.ravel(targets)
-    slope, intercept = np.polyfit(g, o, 1)
-    return slope, intercept, np.corrcoef(g, o)[0, 1]
+notebook_rigid_align = solution("08", "my_rigid_align")
+notebook_aligned_rmse = solution("08", "my_aligned_rmse")
+notebook_regression = solution("08", "my_regression")
 
 
 def test_no_erratum_concerns_the_verdicts_metrics():
@@ -47,7 +33,7 @@ def test_no_erratum_concerns_the_verdicts_metrics():
 
 def test_rigid_align_solution_passes():
     assert gv.check_rigid_align(notebook_rigid_align, quiet=True).startswith(
-        "✓ notebook_rigid_align agrees with map_metrics.rigid_align on 10 inputs")
+        "✓ my_rigid_align agrees with evaluation.map.rigid_align on 10 inputs")
     for seed in (7, 8):
         gv.check_rigid_align(notebook_rigid_align, seed=seed, n=12, quiet=True)
 
@@ -101,14 +87,14 @@ def test_aligned_rmse_is_map_errors_aligned_rmse():
     th = 0.01
     R = np.array([[math.cos(th), -math.sin(th)], [math.sin(th), math.cos(th)]])
     mapped = true @ R.T + np.array([0.05, -0.03]) + rng.normal(0, 0.05, true.shape)
-    m = map_metrics.map_errors(mapped, true, max_distance=1.0)
+    m = map_eval.map_errors(mapped, true, max_distance=1.0)
     assert m.i_mapped.size == 12 and np.array_equal(m.i_mapped, m.j_true)
     assert gv.aligned_rmse(mapped, true) == pytest.approx(m.rmse_aligned, rel=1e-12)
     assert gv.aligned_rmse(mapped, true) < m.rmse
 
 
 def test_aligned_rmse_solution_passes():
-    assert gv.check_aligned_rmse(notebook_aligned_rmse, quiet=True).startswith("✓ notebook_aligned_rmse")
+    assert gv.check_aligned_rmse(notebook_aligned_rmse, quiet=True).startswith("✓ my_aligned_rmse")
     gv.check_aligned_rmse(notebook_aligned_rmse, seed=8, n=12, quiet=True)
 
 
@@ -169,7 +155,7 @@ def test_regression_line_bad_input():
 
 
 def test_regression_solution_passes():
-    assert gv.check_regression(notebook_regression, quiet=True).startswith("✓ notebook_regression")
+    assert gv.check_regression(notebook_regression, quiet=True).startswith("✓ my_regression")
     gv.check_regression(notebook_regression, seed=7, n=12, quiet=True)
 
 

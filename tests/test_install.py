@@ -23,8 +23,8 @@ import time
 from pathlib import Path
 
 import pytest
+from annslam_lib.data import fetch
 
-from annslam_lib import fetch
 
 ROOT = Path(__file__).resolve().parents[1]
 TORCH_CPU = "2.13.0+cpu"

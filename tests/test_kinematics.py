@@ -7,9 +7,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
-from annslam_lib import geometry, kinematics
-from annslam_lib.geometry import numerical_jacobian, wrap_angle
-from annslam_lib.vehicle import ACFR_UTE, Vehicle
+
+from annslam_lib.models.geometry import numerical_jacobian, wrap_angle
+from annslam_lib.models.vehicle import ACFR_UTE, Vehicle
+from annslam_lib.models import geometry
+from annslam_lib.models import motion
 
 V = ACFR_UTE
 HYP = settings(max_examples=200, deadline=None, derandomize=True)
@@ -72,8 +74,8 @@ def test_axle_speed_jacobian(v_e, alpha, veh):
     d = 1 - np.tan(alpha) * veh.H / veh.L
     if abs(d) < 0.05:       # too close to the singularity for a stable difference
         return
-    v_c, J = kinematics.axle_speed(v_e, alpha, veh)
-    J_fd = numerical_jacobian(lambda u: kinematics.axle_speed(u[0], u[1], veh)[0], [v_e, alpha])
+    v_c, J = motion.axle_speed(v_e, alpha, veh)
+    J_fd = numerical_jacobian(lambda u: motion.axle_speed(u[0], u[1], veh)[0], [v_e, alpha])
     assert J.shape == (2,)
     assert_jac(J, J_fd[0], abs(v_c) / abs(d))
 
@@ -82,11 +84,11 @@ def test_axle_speed_jacobian(v_e, alpha, veh):
 @given(x=coord, y=coord, phi=heading, veh=vehicles)
 def test_laser_and_axle_pose_jacobians(x, y, phi, veh):
     p = np.array([x, y, phi])
-    lp, J = kinematics.laser_pose(p, veh)
-    assert_jac(J, numerical_jacobian(lambda q: kinematics.laser_pose(q, veh)[0], p,
+    lp, J = motion.laser_pose(p, veh)
+    assert_jac(J, numerical_jacobian(lambda q: motion.laser_pose(q, veh)[0], p,
                                      angle_outputs=[2]), 200)
-    ap, K = kinematics.axle_pose(lp, veh)
-    assert_jac(K, numerical_jacobian(lambda q: kinematics.axle_pose(q, veh)[0], lp,
+    ap, K = motion.axle_pose(lp, veh)
+    assert_jac(K, numerical_jacobian(lambda q: motion.axle_pose(q, veh)[0], lp,
                                      angle_outputs=[2]), 200)
     np.testing.assert_allclose(ap, p, atol=1e-10)          # axle_pose inverts laser_pose
     np.testing.assert_allclose(J @ K, np.eye(3), atol=1e-12)
@@ -96,11 +98,11 @@ def test_laser_and_axle_pose_jacobians(x, y, phi, veh):
 @given(x=coord, y=coord, phi=heading, v=speed, alpha=steer, dt=dt_s, veh=vehicles)
 def test_predict_jacobians(x, y, phi, v, alpha, dt, veh):
     p, u = np.array([x, y, phi]), np.array([v, alpha])
-    nxt, F, G = kinematics.predict(p, u, dt, veh)
+    nxt, F, G = motion.predict(p, u, dt, veh)
     assert F.shape == (3, 3) and G.shape == (3, 2)
     assert -np.pi < nxt[2] <= np.pi
-    F_fd = numerical_jacobian(lambda q: kinematics.predict(q, u, dt, veh)[0], p, angle_outputs=[2])
-    G_fd = numerical_jacobian(lambda c: kinematics.predict(p, c, dt, veh)[0], u, angle_outputs=[2])
+    F_fd = numerical_jacobian(lambda q: motion.predict(q, u, dt, veh)[0], p, angle_outputs=[2])
+    G_fd = numerical_jacobian(lambda c: motion.predict(p, c, dt, veh)[0], u, angle_outputs=[2])
     assert_jac(F, F_fd, 200)
     assert_jac(G, G_fd, 200)
 
@@ -137,13 +139,13 @@ def test_predict_matches_sympy(symbolic):
         dt = rng.uniform(0, 0.3)
         veh = Vehicle(L=rng.uniform(1, 4), H=0.76, a=rng.uniform(-4, 4), b=rng.uniform(-1, 1))
         args = (*p, *u, dt, veh.L, veh.a, veh.b)
-        nxt, F, G = kinematics.predict(p, u, dt, veh)
+        nxt, F, G = motion.predict(p, u, dt, veh)
         ref = np.asarray(f_s(*args), float).ravel()
         np.testing.assert_allclose(nxt[:2], ref[:2], atol=1e-10)
         assert abs(wrap_angle(nxt[2] - ref[2])) < 1e-10
         np.testing.assert_allclose(F, np.asarray(F_s(*args), float), atol=1e-10)
         np.testing.assert_allclose(G, np.asarray(G_s(*args), float), atol=1e-10)
-        np.testing.assert_allclose(kinematics.laser_velocity(p, u, veh),
+        np.testing.assert_allclose(motion.laser_velocity(p, u, veh),
                                    np.asarray(rate_s(*args), float).ravel(), atol=1e-10)
 
 
@@ -154,7 +156,7 @@ def test_axle_speed_from_rigid_body():
         v_c = 2.0
         omega = v_c * np.tan(alpha) / V.L
         v_e = v_c - omega * V.H
-        assert kinematics.axle_speed(v_e, alpha, V)[0] == pytest.approx(v_c, rel=1e-12)
+        assert motion.axle_speed(v_e, alpha, V)[0] == pytest.approx(v_c, rel=1e-12)
 
 
 # ----------------------------------------------------- model properties
@@ -162,20 +164,20 @@ def test_axle_speed_from_rigid_body():
 def test_zero_speed_and_zero_dt_are_identity():
     p = np.array([3.0, -4.0, 2.5])
     for u, dt in (([0.0, 0.4], 0.5), ([2.0, 0.4], 0.0)):
-        nxt, F, G = kinematics.predict(p, u, dt, V)
+        nxt, F, G = motion.predict(p, u, dt, V)
         np.testing.assert_allclose(nxt, p, atol=1e-15)
         np.testing.assert_allclose(F, np.eye(3), atol=1e-15)
-        np.testing.assert_allclose(kinematics.predict_exact(p, u, dt, V), p, atol=1e-12)
+        np.testing.assert_allclose(motion.predict_exact(p, u, dt, V), p, atol=1e-12)
 
 
 def test_straight_line_closed_form():
     p = np.array([1.0, 2.0, -2.0])
     v, dt = 3.0, 0.7
     expect = np.r_[p[:2] + v * dt * np.array([np.cos(p[2]), np.sin(p[2])]), p[2]]
-    np.testing.assert_allclose(kinematics.predict(p, [v, 0.0], dt, V)[0], expect, atol=1e-12)
-    np.testing.assert_allclose(kinematics.predict_exact(p, [v, 0.0], dt, V), expect, atol=1e-12)
+    np.testing.assert_allclose(motion.predict(p, [v, 0.0], dt, V)[0], expect, atol=1e-12)
+    np.testing.assert_allclose(motion.predict_exact(p, [v, 0.0], dt, V), expect, atol=1e-12)
     # tiny steering: the sinc form has no 0/0, and the arc tends to the line
-    near = kinematics.predict_exact(p, [v, 1e-13], dt, V)
+    near = motion.predict_exact(p, [v, 1e-13], dt, V)
     np.testing.assert_allclose(near, expect, atol=1e-9)
 
 
@@ -183,10 +185,10 @@ def test_full_circle_returns_to_start():
     p = np.array([5.0, -3.0, 3.1])
     for v, alpha in ((2.0, 0.3), (1.5, -0.45), (-1.0, 0.2)):
         period = 2 * np.pi * V.L / abs(v * np.tan(alpha))
-        end = kinematics.predict_exact(p, [v, alpha], period, V)
+        end = motion.predict_exact(p, [v, alpha], period, V)
         np.testing.assert_allclose(end[:2], p[:2], atol=1e-9)
         assert abs(wrap_angle(end[2] - p[2])) < 1e-12
-        half = kinematics.predict_exact(p, [v, alpha], period / 2, V)
+        half = motion.predict_exact(p, [v, alpha], period / 2, V)
         radius_axle = V.L / abs(np.tan(alpha))        # laser swings on a circle around the ICR
         assert np.linalg.norm(half[:2] - p[:2]) > radius_axle
 
@@ -196,9 +198,9 @@ def test_exact_matches_ode_integration():
     for _ in range(5):
         p = np.r_[rng.uniform(-10, 10, 2), rng.uniform(-np.pi, np.pi)]
         u = np.r_[rng.uniform(0.5, 3), rng.uniform(-0.6, 0.6)]
-        sol = solve_ivp(lambda t, s: kinematics.laser_velocity(s, u, V), (0, 2.0), p,
+        sol = solve_ivp(lambda t, s: motion.laser_velocity(s, u, V), (0, 2.0), p,
                         rtol=1e-12, atol=1e-12)
-        end = kinematics.predict_exact(p, u, 2.0, V)
+        end = motion.predict_exact(p, u, 2.0, V)
         np.testing.assert_allclose(end[:2], sol.y[:2, -1], atol=1e-8)
         assert abs(wrap_angle(end[2] - sol.y[2, -1])) < 1e-8
 
@@ -206,19 +208,19 @@ def test_exact_matches_ode_integration():
 def test_exact_is_a_flow():
     """Constant control: two half steps equal one step (semigroup property)."""
     p, u = np.array([0.0, 1.0, -3.0]), np.array([2.5, -0.4])
-    one = kinematics.predict_exact(p, u, 1.2, V)
-    two = kinematics.predict_exact(kinematics.predict_exact(p, u, 0.6, V), u, 0.6, V)
+    one = motion.predict_exact(p, u, 1.2, V)
+    two = motion.predict_exact(motion.predict_exact(p, u, 0.6, V), u, 0.6, V)
     np.testing.assert_allclose(one, two, atol=1e-12)
 
 
 def test_euler_first_order_convergence():
     p, u, T = np.array([1.0, 2.0, 0.3]), np.array([2.0, 0.3]), 1.0
-    exact = kinematics.predict_exact(p, u, T, V)
+    exact = motion.predict_exact(p, u, T, V)
     errs = []
     for n in (100, 200, 400):
         q = p.copy()
         for _ in range(n):
-            q = kinematics.predict(q, u, T / n, V)[0]
+            q = motion.predict(q, u, T / n, V)[0]
         errs.append(np.linalg.norm(q[:2] - exact[:2]))
     for e1, e2 in zip(errs, errs[1:]):
         assert 1.8 < e1 / e2 < 2.2
@@ -230,41 +232,42 @@ def test_batches_equal_loops():
     P = np.c_[rng.uniform(-9, 9, (6, 2)), rng.uniform(-np.pi, np.pi, 6)]
     U = np.c_[rng.uniform(-3, 3, 6), rng.uniform(-0.6, 0.6, 6)]
     dt = rng.uniform(0, 0.2, 6)
-    nxt, F, G = kinematics.predict(P, U, dt, V)
-    ex = kinematics.predict_exact(P, U, dt, V)
-    lp, J = kinematics.laser_pose(P, V)
+    nxt, F, G = motion.predict(P, U, dt, V)
+    ex = motion.predict_exact(P, U, dt, V)
+    lp, J = motion.laser_pose(P, V)
     assert nxt.shape == (6, 3) and F.shape == (6, 3, 3) and G.shape == (6, 3, 2)
     for i in range(6):
-        n1, F1, G1 = kinematics.predict(P[i], U[i], dt[i], V)
+        n1, F1, G1 = motion.predict(P[i], U[i], dt[i], V)
         np.testing.assert_allclose(nxt[i], n1)
         np.testing.assert_allclose(F[i], F1)
         np.testing.assert_allclose(G[i], G1)
-        np.testing.assert_allclose(ex[i], kinematics.predict_exact(P[i], U[i], dt[i], V))
-        np.testing.assert_allclose(J[i], kinematics.laser_pose(P[i], V)[1])
-    vc, Jv = kinematics.axle_speed(U[:, 0], U[:, 1], V)
+        np.testing.assert_allclose(ex[i], motion.predict_exact(P[i], U[i], dt[i], V))
+        np.testing.assert_allclose(J[i], motion.laser_pose(P[i], V)[1])
+    vc, Jv = motion.axle_speed(U[:, 0], U[:, 1], V)
     assert vc.shape == (6,) and Jv.shape == (6, 2)
-    np.testing.assert_allclose(vc[2], kinematics.axle_speed(U[2, 0], U[2, 1], V)[0])
+    np.testing.assert_allclose(vc[2], motion.axle_speed(U[2, 0], U[2, 1], V)[0])
 
 
 # --------------------------------------------------------------- bad input
 
 @pytest.mark.parametrize("call, match", [
-    (lambda: kinematics.predict([0, 0], [1, 0], 0.1, V), "pose must have shape"),
-    (lambda: kinematics.predict([0, 0, 0], [1, 0, 0], 0.1, V), "control must have shape"),
-    (lambda: kinematics.predict([0, np.nan, 0], [1, 0], 0.1, V), "pose contains NaN"),
-    (lambda: kinematics.predict([0, 0, 0], [1, np.inf], 0.1, V), "control contains NaN"),
-    (lambda: kinematics.predict([0, 0, 0], [1, 0], -0.1, V), "dt must be >= 0"),
-    (lambda: kinematics.predict([0, 0, 0], [1, 0], np.nan, V), "dt contains NaN"),
-    (lambda: kinematics.predict([0, 0, 0], [1, 1.6], 0.1, V), "steering"),
-    (lambda: kinematics.predict_exact([0, 0, 0], [1, -np.pi / 2], 0.1, V), "steering"),
-    (lambda: kinematics.predict([0, 0, 0], [1, 0], 0.1, None), "vehicle must be"),
-    (lambda: kinematics.laser_pose([[0, 0]], V), "axle_pose must have shape"),
-    (lambda: kinematics.axle_pose("abc", V), "laser_pose must be numeric"),
-    (lambda: kinematics.axle_speed(1.0, np.arctan(V.L / V.H), V), "singular steering"),
-    (lambda: kinematics.axle_speed(np.nan, 0.1, V), "encoder_speed contains NaN"),
-    (lambda: kinematics.axle_speed(1.0, 2.0, V), "steering must satisfy"),
-    (lambda: kinematics.predict(np.zeros((3, 3)), np.zeros((2, 2)), 0.1, V), "broadcast"),
+    (lambda: motion.predict([0, 0], [1, 0], 0.1, V), "pose must have shape"),
+    (lambda: motion.predict([0, 0, 0], [1, 0, 0], 0.1, V), "control must have shape"),
+    (lambda: motion.predict([0, np.nan, 0], [1, 0], 0.1, V), "pose contains NaN"),
+    (lambda: motion.predict([0, 0, 0], [1, np.inf], 0.1, V), "control contains NaN"),
+    (lambda: motion.predict([0, 0, 0], [1, 0], -0.1, V), "dt must be >= 0"),
+    (lambda: motion.predict([0, 0, 0], [1, 0], np.nan, V), "dt contains NaN"),
+    (lambda: motion.predict([0, 0, 0], [1, 1.6], 0.1, V), "steering"),
+    (lambda: motion.predict_exact([0, 0, 0], [1, -np.pi / 2], 0.1, V), "steering"),
+    (lambda: motion.predict([0, 0, 0], [1, 0], 0.1, None), "vehicle must be"),
+    (lambda: motion.laser_pose([[0, 0]], V), "axle_pose must have shape"),
+    (lambda: motion.axle_pose("abc", V), "laser_pose must be numeric"),
+    (lambda: motion.axle_speed(1.0, np.arctan(V.L / V.H), V), "singular steering"),
+    (lambda: motion.axle_speed(np.nan, 0.1, V), "encoder_speed contains NaN"),
+    (lambda: motion.axle_speed(1.0, 2.0, V), "steering must satisfy"),
+    (lambda: motion.predict(np.zeros((3, 3)), np.zeros((2, 2)), 0.1, V), "broadcast"),
 ])
 def test_bad_input_raises(call, match):
-    with pytest.raises(ValueError, match=match):
+    kind = TypeError if match in ("vehicle must be", "laser_pose must be numeric") else ValueError
+    with pytest.raises(kind, match=match):
         call()

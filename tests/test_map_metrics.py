@@ -3,8 +3,7 @@ import math
 
 import numpy as np
 import pytest
-
-from annslam_lib import map_metrics
+from annslam_lib.evaluation import map as map_eval
 
 
 def rot(a):
@@ -20,18 +19,18 @@ def beacons():
                                           (-2.5, (-7.0, 4.0)), (math.pi, (0.5, 0.5))])
 def test_rigid_align_recovers_known_motion(beacons, angle, shift):
     moved = beacons @ rot(angle).T + shift
-    R, t = map_metrics.rigid_align(beacons, moved)
+    R, t = map_eval.rigid_align(beacons, moved)
     np.testing.assert_allclose(R, rot(angle), atol=1e-12)
     np.testing.assert_allclose(t, shift, atol=1e-12)
 
 
 def test_rigid_align_is_least_squares_and_not_a_reflection(beacons):
     mirrored = beacons * [1.0, -1.0]
-    R, _ = map_metrics.rigid_align(beacons, mirrored)
+    R, _ = map_eval.rigid_align(beacons, mirrored)
     assert np.linalg.det(R) == pytest.approx(1.0)
     # small perturbations of the optimum never lower the cost
     noisy = beacons @ rot(0.2).T + [1, 2] + np.random.default_rng(1).normal(0, 0.1, beacons.shape)
-    R, t = map_metrics.rigid_align(beacons, noisy)
+    R, t = map_eval.rigid_align(beacons, noisy)
     cost = lambda R_, t_: np.sum((beacons @ R_.T + t_ - noisy) ** 2)  # noqa: E731
     best = cost(R, t)
     a = math.atan2(R[1, 0], R[0, 0])
@@ -46,7 +45,7 @@ def test_map_errors_absolute_and_aligned(beacons):
     mapped = beacons @ rot(math.radians(1.0)).T + true_shift
     order = np.random.default_rng(2).permutation(15)
     mapped = np.vstack([mapped[order], beacons[4] + [0.3, 0.0], [100.0, 100.0]])
-    e = map_metrics.map_errors(mapped, beacons, max_distance=1.0)
+    e = map_eval.map_errors(mapped, beacons, max_distance=1.0)
     assert e.i_mapped.size == 15 and e.missed == 0
     assert e.spurious == 2 and e.duplicates == 1
     np.testing.assert_array_equal(e.j_true, order[e.i_mapped])
@@ -57,12 +56,12 @@ def test_map_errors_absolute_and_aligned(beacons):
 
 
 def test_map_errors_missed_and_bad_input(beacons):
-    e = map_metrics.map_errors(beacons[:10] + 0.05, beacons)
+    e = map_eval.map_errors(beacons[:10] + 0.05, beacons)
     assert e.missed == 5 and e.spurious == 0
     assert e.rmse == pytest.approx(0.05 * math.sqrt(2), rel=1e-12)
     with pytest.raises(ValueError, match="need 2 to align"):
-        map_metrics.map_errors(beacons[:1], beacons)
+        map_eval.map_errors(beacons[:1], beacons)
     with pytest.raises(ValueError, match="mapped"):
-        map_metrics.map_errors(np.array([[np.nan, 0.0], [1.0, 1.0]]), beacons)
+        map_eval.map_errors(np.array([[np.nan, 0.0], [1.0, 1.0]]), beacons)
     with pytest.raises(ValueError, match="max_distance"):
-        map_metrics.match_landmarks(beacons, beacons, max_distance=-1)
+        map_eval.match_landmarks(beacons, beacons, max_distance=-1)

@@ -2,8 +2,10 @@
 import numpy as np
 import pytest
 
-from annslam_lib import metrics
-from annslam_lib.records import Gps
+
+from annslam_lib.data.records import Gps
+from annslam_lib.evaluation import trajectory
+from annslam_lib.models import geometry
 
 
 def line(n=201, t0=0.0, t1=20.0, v=1.5, phi=0.4):
@@ -21,8 +23,8 @@ def test_constant_offset_gives_that_error():
     traj = line()
     d, beta = 0.37, 2.1
     t = np.linspace(0.05, 19.95, 100)                  # between the rows: interpolation is used
-    truth = metrics.interpolate_poses(traj, t)[:, :2]
-    e = metrics.trajectory_errors(traj, gps_at(t, truth + d * np.array([np.cos(beta), np.sin(beta)])))
+    truth = geometry.interpolate_poses(traj, t)[:, :2]
+    e = trajectory.trajectory_errors(traj, gps_at(t, truth + d * np.array([np.cos(beta), np.sin(beta)])))
     for value in (e.rmse, e.mean, e.max, e.final):
         assert value == pytest.approx(d, abs=1e-12)
     np.testing.assert_allclose(e.offset, np.broadcast_to(-d * np.array([np.cos(beta), np.sin(beta)]),
@@ -34,9 +36,9 @@ def test_growing_error_known_rmse_max_final():
     """Error equal to the time since the start: RMSE = sqrt(mean t^2), max = final = t_end."""
     traj = line()
     t = np.arange(0.5, 20.0, 0.5)
-    truth = metrics.interpolate_poses(traj, t)[:, :2]
+    truth = geometry.interpolate_poses(traj, t)[:, :2]
     side = np.column_stack([-np.sin(0.4) * t, np.cos(0.4) * t])    # t metres to the left
-    e = metrics.trajectory_errors(traj, gps_at(t, truth + side))
+    e = trajectory.trajectory_errors(traj, gps_at(t, truth + side))
     assert e.rmse == pytest.approx(np.sqrt(np.sum(t**2) / t.size), rel=1e-12)
     assert e.max == pytest.approx(t[-1], rel=1e-12) and e.final == pytest.approx(t[-1], rel=1e-12)
     assert e.t_max == t[-1]
@@ -45,15 +47,15 @@ def test_growing_error_known_rmse_max_final():
 
 def test_interpolation_positions_and_knots():
     traj = line(n=11)
-    np.testing.assert_allclose(metrics.interpolate_poses(traj, traj[:, 0]), traj[:, 1:], atol=1e-12)
-    mid = metrics.interpolate_poses(traj, 1.0)           # halfway between rows at 0 and 2 s
+    np.testing.assert_allclose(geometry.interpolate_poses(traj, traj[:, 0]), traj[:, 1:], atol=1e-12)
+    mid = geometry.interpolate_poses(traj, 1.0)           # halfway between rows at 0 and 2 s
     assert mid.shape == (3,)
     np.testing.assert_allclose(mid[:2], 0.5 * (traj[0, 1:3] + traj[1, 1:3]), atol=1e-12)
 
 
 def test_heading_interpolates_the_short_way_across_pi():
     traj = np.array([[0.0, 0, 0, 3.1], [1.0, 1, 0, -3.1]])     # turning left through +-pi
-    phi = metrics.interpolate_poses(traj, [0.5, 0.25])[:, 2]
+    phi = geometry.interpolate_poses(traj, [0.5, 0.25])[:, 2]
     assert abs(np.angle(np.exp(1j * (phi[0] - np.pi)))) < 1e-12
     step = 2 * np.pi - 6.2                                      # 0.0832 rad the short way
     assert phi[1] == pytest.approx(3.1 + step / 4, abs=1e-12)
@@ -65,9 +67,9 @@ def test_only_fixes_inside_the_span_are_used():
     t = np.arange(0.0, 20.0, 0.2)
     xy = np.zeros((t.size, 2))
     inside = (t >= 5.0) & (t <= 15.0)
-    xy[inside] = metrics.interpolate_poses(traj, t[inside])[:, :2] + [0.1, 0.0]
+    xy[inside] = geometry.interpolate_poses(traj, t[inside])[:, :2] + [0.1, 0.0]
     xy[~inside] = 1e6                                  # absurd fixes: must be ignored
-    e = metrics.trajectory_errors(traj, gps_at(t, xy))
+    e = trajectory.trajectory_errors(traj, gps_at(t, xy))
     assert e.n_outside == int((~inside).sum()) and e.t.size == int(inside.sum())
     assert e.max == pytest.approx(0.1, abs=1e-12)
 
@@ -75,10 +77,11 @@ def test_only_fixes_inside_the_span_are_used():
 @pytest.mark.parametrize("bad", [np.zeros((5, 3)), np.zeros(4), np.zeros((2, 5, 4)),
                                  np.zeros((0, 4)), "abc"])
 def test_bad_trajectory_shapes(bad):
-    with pytest.raises(ValueError):
-        metrics.interpolate_poses(bad, 0.0)
-    with pytest.raises(ValueError):
-        metrics.trajectory_errors(bad, gps_at(np.array([0.0]), np.zeros((1, 2))))
+    kind = TypeError if isinstance(bad, str) else ValueError
+    with pytest.raises(kind):
+        geometry.interpolate_poses(bad, 0.0)
+    with pytest.raises(kind):
+        trajectory.trajectory_errors(bad, gps_at(np.array([0.0]), np.zeros((1, 2))))
 
 
 def test_bad_values_and_times():
@@ -86,17 +89,17 @@ def test_bad_values_and_times():
     nan = traj.copy()
     nan[3, 2] = np.nan
     with pytest.raises(ValueError, match="NaN"):
-        metrics.trajectory_errors(nan, gps_at(np.array([1.0]), np.zeros((1, 2))))
+        trajectory.trajectory_errors(nan, gps_at(np.array([1.0]), np.zeros((1, 2))))
     backwards = traj[::-1]
     with pytest.raises(ValueError, match="non-decreasing"):
-        metrics.interpolate_poses(backwards, 1.0)
+        geometry.interpolate_poses(backwards, 1.0)
     with pytest.raises(ValueError, match="outside"):
-        metrics.interpolate_poses(traj, [1.0, 20.5])
+        geometry.interpolate_poses(traj, [1.0, 20.5])
     with pytest.raises(ValueError, match="NaN"):
-        metrics.interpolate_poses(traj, [1.0, np.nan])
+        geometry.interpolate_poses(traj, [1.0, np.nan])
     with pytest.raises(ValueError, match="one-dimensional"):
-        metrics.interpolate_poses(traj, np.ones((2, 2)))
+        geometry.interpolate_poses(traj, np.ones((2, 2)))
     with pytest.raises(ValueError, match="no GPS fix inside"):
-        metrics.trajectory_errors(traj, gps_at(np.array([25.0, 26.0]), np.zeros((2, 2))))
-    with pytest.raises(ValueError, match="Gps"):
-        metrics.trajectory_errors(traj, np.zeros((3, 3)))
+        trajectory.trajectory_errors(traj, gps_at(np.array([25.0, 26.0]), np.zeros((2, 2))))
+    with pytest.raises(TypeError, match="Gps"):
+        trajectory.trajectory_errors(traj, np.zeros((3, 3)))

@@ -6,8 +6,9 @@ import sympy as sp
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from annslam_lib import observation as obs
-from annslam_lib.geometry import numerical_jacobian, wrap_angle
+
+from annslam_lib.models.geometry import numerical_jacobian, wrap_angle
+from annslam_lib.models import observation
 
 HYP = settings(max_examples=200, deadline=None, derandomize=True)
 coord = st.floats(-100.0, 100.0)
@@ -29,11 +30,11 @@ def test_laser_bearing_convention():
         ahead = pose[:2] + 5 * np.array([np.cos(phi), np.sin(phi)])
         right = pose[:2] + 3 * np.array([np.sin(phi), -np.cos(phi)])
         left = pose[:2] - 4 * np.array([np.sin(phi), -np.cos(phi)])
-        z, _, _ = obs.observe(pose, np.array([ahead, right, left]))
+        z, _, _ = observation.observe(pose, np.array([ahead, right, left]))
         np.testing.assert_allclose(z[:, 0], [5, 3, 4])
         np.testing.assert_allclose(z[:, 1], [np.pi / 2, 0, np.pi], atol=1e-12)
     # behind: -pi/2 (wrapped), never 3 pi / 2
-    z, _, _ = obs.observe([0, 0, 0], [-2, 0])
+    z, _, _ = observation.observe([0, 0, 0], [-2, 0])
     assert z[1] == pytest.approx(-np.pi / 2)
 
 
@@ -41,7 +42,7 @@ def test_bearing_matches_laser_points():
     """A landmark observed at (r, beta) lies where Laser.points puts beam beta."""
     pose = np.array([1.0, 2.0, 0.7])
     z = np.array([[6.0, 0.3], [2.0, 2.9]])
-    lm, _, _ = obs.inverse_observe(pose, z)
+    lm, _, _ = observation.inverse_observe(pose, z)
     local = np.c_[z[:, 0] * np.sin(z[:, 1]), -z[:, 0] * np.cos(z[:, 1])]    # records.Laser.points
     c, s = np.cos(pose[2]), np.sin(pose[2])
     world = pose[:2] + local @ np.array([[c, s], [-s, c]])
@@ -55,10 +56,10 @@ def test_bearing_matches_laser_points():
 def test_observe_jacobians(x, y, phi, dx, dy):
     assume(np.hypot(dx, dy) > 0.5)
     pose, lm = np.array([x, y, phi]), np.array([x + dx, y + dy])
-    z, Hp, Hl = obs.observe(pose, lm)
+    z, Hp, Hl = observation.observe(pose, lm)
     assert -np.pi < z[1] <= np.pi
-    Hp_fd = numerical_jacobian(lambda q: obs.observe(q, lm)[0], pose, angle_outputs=[1])
-    Hl_fd = numerical_jacobian(lambda m: obs.observe(pose, m)[0], lm, angle_outputs=[1])
+    Hp_fd = numerical_jacobian(lambda q: observation.observe(q, lm)[0], pose, angle_outputs=[1])
+    Hl_fd = numerical_jacobian(lambda m: observation.observe(pose, m)[0], lm, angle_outputs=[1])
     assert_jac(Hp, Hp_fd, 100)
     assert_jac(Hl, Hl_fd, 100)
     np.testing.assert_allclose(Hl, -Hp[:, :2], atol=1e-15)   # only lm - position matters
@@ -68,10 +69,10 @@ def test_observe_jacobians(x, y, phi, dx, dy):
 @given(x=coord, y=coord, phi=heading, r=st.floats(0.5, 80.0), beta=heading)
 def test_inverse_observe_jacobians_and_round_trip(x, y, phi, r, beta):
     pose, z = np.array([x, y, phi]), np.array([r, beta])
-    lm, Jp, Jz = obs.inverse_observe(pose, z)
-    assert_jac(Jp, numerical_jacobian(lambda q: obs.inverse_observe(q, z)[0], pose), 200)
-    assert_jac(Jz, numerical_jacobian(lambda q: obs.inverse_observe(pose, q)[0], z), 200)
-    z2, Hp, Hl = obs.observe(pose, lm)
+    lm, Jp, Jz = observation.inverse_observe(pose, z)
+    assert_jac(Jp, numerical_jacobian(lambda q: observation.inverse_observe(q, z)[0], pose), 200)
+    assert_jac(Jz, numerical_jacobian(lambda q: observation.inverse_observe(pose, q)[0], z), 200)
+    z2, Hp, Hl = observation.observe(pose, lm)
     assert z2[0] == pytest.approx(r, rel=1e-9)
     assert abs(wrap_angle(z2[1] - beta)) < 1e-9
     # the inverse model's Jacobian w.r.t. z inverts the observation's w.r.t. the landmark
@@ -83,11 +84,11 @@ def test_inverse_observe_jacobians_and_round_trip(x, y, phi, r, beta):
 def test_two_point_jacobians(xr, yr, xl, yl):
     assume(np.hypot(xr - xl, yr - yl) > 0.5)
     pr, pl = np.array([xr, yr]), np.array([xl, yl])
-    f, Jr, Jl = obs.landmark_from_two_points(pr, pl)
+    f, Jr, Jl = observation.landmark_from_two_points(pr, pl)
     assert -np.pi < f[2] <= np.pi
-    assert_jac(Jr, numerical_jacobian(lambda q: obs.landmark_from_two_points(q, pl)[0], pr,
+    assert_jac(Jr, numerical_jacobian(lambda q: observation.landmark_from_two_points(q, pl)[0], pr,
                                       angle_outputs=[2]), 300)
-    assert_jac(Jl, numerical_jacobian(lambda q: obs.landmark_from_two_points(pr, q)[0], pl,
+    assert_jac(Jl, numerical_jacobian(lambda q: observation.landmark_from_two_points(pr, q)[0], pl,
                                       angle_outputs=[2]), 300)
 
 
@@ -114,7 +115,7 @@ def test_observe_matches_sympy(symbolic):
     rng = np.random.default_rng(21)
     pose = np.c_[rng.uniform(-50, 50, (100, 2)), rng.uniform(-np.pi, np.pi, 100)]
     lm = pose[:, :2] + rng.uniform(-30, 30, (100, 2))
-    z, Hp, Hl = obs.observe(pose, lm)          # batched over poses and landmarks
+    z, Hp, Hl = observation.observe(pose, lm)          # batched over poses and landmarks
     for k in range(100):
         args = (*pose[k], *lm[k])
         ref = np.asarray(symbolic["h"](*args), float).ravel()
@@ -129,7 +130,7 @@ def test_inverse_observe_matches_sympy(symbolic):
     rng = np.random.default_rng(22)
     pose = np.r_[rng.uniform(-50, 50, 2), rng.uniform(-np.pi, np.pi)]
     z = np.c_[rng.uniform(0.5, 80, 50), rng.uniform(-np.pi, np.pi, 50)]
-    lm, Jp, Jz = obs.inverse_observe(pose, z)           # one pose, M measurements
+    lm, Jp, Jz = observation.inverse_observe(pose, z)           # one pose, M measurements
     assert lm.shape == (50, 2) and Jp.shape == (50, 2, 3) and Jz.shape == (50, 2, 2)
     for k in range(50):
         args = (*pose, *z[k])
@@ -142,10 +143,10 @@ def test_inverse_observe_matches_sympy(symbolic):
 def test_vectorised_observe_equals_loop():
     pose = np.array([3.0, -2.0, -3.1])
     lm = np.array([[10.0, 4.0], [-7.0, -2.0], [3.0, 5.0]])
-    z, Hp, Hl = obs.observe(pose, lm)
+    z, Hp, Hl = observation.observe(pose, lm)
     assert z.shape == (3, 2) and Hp.shape == (3, 2, 3) and Hl.shape == (3, 2, 2)
     for k in range(3):
-        zk, Hpk, Hlk = obs.observe(pose, lm[k])
+        zk, Hpk, Hlk = observation.observe(pose, lm[k])
         np.testing.assert_allclose(z[k], zk)
         np.testing.assert_allclose(Hp[k], Hpk)
         np.testing.assert_allclose(Hl[k], Hlk)
@@ -156,8 +157,8 @@ def test_vectorised_observe_equals_loop():
 def test_two_point_frame_geometry():
     rng = np.random.default_rng(7)
     pr, pl = rng.uniform(-10, 10, (40, 2)), rng.uniform(-10, 10, (40, 2))
-    f, _, _ = obs.landmark_from_two_points(pr, pl)
-    T = obs.two_point_transform(pr, pl)
+    f, _, _ = observation.landmark_from_two_points(pr, pl)
+    T = observation.two_point_transform(pr, pl)
     h = lambda p: np.c_[p, np.ones(len(p))][..., None]  # noqa: E731
     # ijT_r sends the left point to the origin and the right point onto the +x axis
     np.testing.assert_allclose((T @ h(pl))[:, :2, 0], 0, atol=1e-12)
@@ -177,25 +178,25 @@ def test_two_point_frame_geometry():
     ([1.0, 1.0], [3.0, 1.0], np.pi),                # pointing backwards: +pi, not -pi
 ])
 def test_two_point_theta_cases(pr, pl, theta):
-    assert obs.landmark_from_two_points(pr, pl)[0][2] == pytest.approx(theta, abs=1e-15)
+    assert observation.landmark_from_two_points(pr, pl)[0][2] == pytest.approx(theta, abs=1e-15)
 
 
 # --------------------------------------------------------------- bad input
 
 @pytest.mark.parametrize("call, match", [
-    (lambda: obs.observe([1.0, 2.0, 0.3], [1.0, 2.0]), "landmark coincides with the sensor"),
-    (lambda: obs.observe([1.0, 2.0, 0.3], [[5, 5], [1.0 + 1e-10, 2.0]]), "coincides"),
-    (lambda: obs.observe([1.0, 2.0], [5.0, 5.0]), "pose must have shape"),
-    (lambda: obs.observe([1.0, 2.0, 0.0], [5.0, 5.0, 1.0]), "landmark must have shape"),
-    (lambda: obs.observe([1.0, 2.0, np.nan], [5.0, 5.0]), "pose contains NaN"),
-    (lambda: obs.observe([1.0, 2.0, 0.0], [np.inf, 5.0]), "landmark contains NaN"),
-    (lambda: obs.inverse_observe([0, 0, 0], [0.0, 1.0]), "range must be > 0"),
-    (lambda: obs.inverse_observe([0, 0, 0], [[3.0, 1.0], [-1.0, 1.0]]), "range must be > 0"),
-    (lambda: obs.inverse_observe([0, 0, 0], [1.0]), "z must have shape"),
-    (lambda: obs.inverse_observe([0, 0, 0], [1.0, np.nan]), "z contains NaN"),
-    (lambda: obs.landmark_from_two_points([1, 1], [1, 1]), "coincide"),
-    (lambda: obs.landmark_from_two_points([1, 1, 0], [1, 1]), "p_right must have shape"),
-    (lambda: obs.landmark_from_two_points([1, 1], [np.nan, 1]), "p_left contains NaN"),
+    (lambda: observation.observe([1.0, 2.0, 0.3], [1.0, 2.0]), "landmark coincides with the sensor"),
+    (lambda: observation.observe([1.0, 2.0, 0.3], [[5, 5], [1.0 + 1e-10, 2.0]]), "coincides"),
+    (lambda: observation.observe([1.0, 2.0], [5.0, 5.0]), "pose must have shape"),
+    (lambda: observation.observe([1.0, 2.0, 0.0], [5.0, 5.0, 1.0]), "landmark must have shape"),
+    (lambda: observation.observe([1.0, 2.0, np.nan], [5.0, 5.0]), "pose contains NaN"),
+    (lambda: observation.observe([1.0, 2.0, 0.0], [np.inf, 5.0]), "landmark contains NaN"),
+    (lambda: observation.inverse_observe([0, 0, 0], [0.0, 1.0]), "range must be > 0"),
+    (lambda: observation.inverse_observe([0, 0, 0], [[3.0, 1.0], [-1.0, 1.0]]), "range must be > 0"),
+    (lambda: observation.inverse_observe([0, 0, 0], [1.0]), "z must have shape"),
+    (lambda: observation.inverse_observe([0, 0, 0], [1.0, np.nan]), "z contains NaN"),
+    (lambda: observation.landmark_from_two_points([1, 1], [1, 1]), "coincide"),
+    (lambda: observation.landmark_from_two_points([1, 1, 0], [1, 1]), "p_right must have shape"),
+    (lambda: observation.landmark_from_two_points([1, 1], [np.nan, 1]), "p_left contains NaN"),
 ])
 def test_bad_input_raises(call, match):
     with pytest.raises(ValueError, match=match):

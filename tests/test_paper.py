@@ -3,9 +3,11 @@ wrong as printed and right as corrected; each confirmed equation is right."""
 import numpy as np
 import pytest
 
-from annslam_lib import kinematics, observation, paper
-from annslam_lib.geometry import wrap_angle
-from annslam_lib.vehicle import Vehicle
+from annslam_lib import paper
+from annslam_lib.models.geometry import wrap_angle
+from annslam_lib.models.vehicle import Vehicle
+from annslam_lib.models import motion
+from annslam_lib.models import observation
 
 TOY = Vehicle(L=2.0, H=1.0, a=3.0, b=1.0)
 NUMERIC = [e for e in paper.ERRATA if e.check is not None]
@@ -54,7 +56,7 @@ def test_full_state_printed_by_hand():
     # correct: x = 2 - 0.5 (0 + 1) = 1.5, y = 0 + 0.5 (3 - 0) = 1.5
     pose, u = [0.0, 0.0, 0.0], [2.0, np.arctan(0.5)]
     np.testing.assert_allclose(paper.full_state_printed(pose, u, TOY), [0.0, -1.5, 0.5], atol=1e-15)
-    np.testing.assert_allclose(kinematics.laser_velocity(pose, u, TOY), [1.5, 1.5, 0.5], atol=1e-15)
+    np.testing.assert_allclose(motion.laser_velocity(pose, u, TOY), [1.5, 1.5, 0.5], atol=1e-15)
 
 
 def test_speed_translation_printed_by_hand():
@@ -62,7 +64,7 @@ def test_speed_translation_printed_by_hand():
     al = np.arctan(0.5)
     assert paper.speed_translation_printed(1.0, al, TOY) == pytest.approx(4 / 3)
     assert paper.speed_translation_printed(1.0, 0.0, TOY) == pytest.approx(1.0)
-    assert kinematics.axle_speed(0.75, al, TOY)[0] == pytest.approx(1.0)
+    assert motion.axle_speed(0.75, al, TOY)[0] == pytest.approx(1.0)
 
 
 def test_discrete_heading_row_is_the_rate():
@@ -71,7 +73,7 @@ def test_discrete_heading_row_is_the_rate():
         for inside in (False, True):
             got = paper.discrete_model_printed([1.0, 2.0, phi], u, 0.1, TOY, tan_inside=inside)
             assert got[2] == pytest.approx(0.5)       # V/L tan(alpha), whatever phi was
-        assert kinematics.predict([1.0, 2.0, phi], u, 0.1, TOY)[0][2] == \
+        assert motion.predict([1.0, 2.0, phi], u, 0.1, TOY)[0][2] == \
             pytest.approx(wrap_angle(phi + 0.05))
 
 

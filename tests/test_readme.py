@@ -19,7 +19,7 @@ def test_readme_errata_table_is_the_library_table():
 
 
 def test_readme_exercise_table_is_the_notebooks_table():
-    from annslam_lib.release import exercise_table
+    from annslam_lib.course.release import exercise_table
 
     block = re.search(r"<!-- exercises:begin -->\n(.*?)\n?<!-- exercises:end -->", README, re.S)
     assert block, "README lost its exercises markers"

@@ -10,8 +10,9 @@ import nbformat
 import pytest
 from nbformat.v4 import new_code_cell, new_markdown_cell, new_notebook
 
-from annslam_lib import release
-from annslam_lib.release import ReleaseError
+
+from annslam_lib.course.release import ReleaseError
+from annslam_lib.course import release
 
 ROOT = Path(__file__).resolve().parents[1]
 COURSE = sorted((ROOT / "notebooks").glob("*.ipynb"))
@@ -161,7 +162,7 @@ def test_student_version_holds_no_solution_code_no_hidden_tests_no_outputs(path,
 
 
 def test_cli_release_writes_every_notebook(tmp_path, capsys):
-    from annslam_lib.__main__ import main
+    from annslam_lib.course.cli import main
 
     assert main(["release", "--out", str(tmp_path / "s")]) == 0
     assert sorted(p.name for p in (tmp_path / "s").glob("*.ipynb")) == [p.name for p in COURSE]

@@ -9,11 +9,18 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-pytest.importorskip("torch")
-
-from annslam_lib import ann, ekf_slam, features, map_metrics, metrics, reproduce, simulate  # noqa: E402
-from annslam_lib.__main__ import build_parser, main  # noqa: E402
-from annslam_lib.records import LASER_ANGLES, Laser  # noqa: E402
+from annslam_lib import ann
+from annslam_lib.course.cli import build_parser, main
+from annslam_lib.data.records import LASER_ANGLES, Laser
+from annslam_lib.data import simulate
+from annslam_lib.evaluation import map as map_eval
+from annslam_lib.evaluation import summary
+from annslam_lib.evaluation import trajectory
+from annslam_lib.paper import report
+from annslam_lib.paper import study
+from annslam_lib.perception import beacons
+from annslam_lib.slam import config as slam_config
+from annslam_lib.slam import runner
 
 FIGURES = ("fig5_map.png", "fig6_error_histogram.png", "fig7_performance.png", "fig8_regression.png")
 
@@ -33,7 +40,7 @@ def test_point_features_keep_narrow_foreground_segments():
     r[300:302] = 3.0                                             # a post in front of NO return
     r[299], r[302] = 81.91, 81.91
     r[0:3] = 2.0                                                 # cut by the field of view
-    det = features.point_features(_scan(r))
+    det = beacons.point_features(_scan(r))
     assert det.count == 2 and len(det) == 1
     np.testing.assert_allclose(det.range, [5.0, 3.0], atol=1e-12)
     np.testing.assert_allclose(det.bearing, [LASER_ANGLES[[100, 103]].mean(),
@@ -41,7 +48,7 @@ def test_point_features_keep_narrow_foreground_segments():
     np.testing.assert_allclose(det.diameter, [4 * np.radians(0.5) * 5.0, 2 * np.radians(0.5) * 3.0])
     assert np.all(det.intensity == 0)
     # Narrower width limit: the 17 cm pole goes, the 5 cm post stays.
-    assert features.point_features(_scan(r), max_width=0.1).count == 1
+    assert beacons.point_features(_scan(r), max_width=0.1).count == 1
 
 
 def test_point_features_need_both_sides_farther_and_can_skip_tape():
@@ -49,25 +56,26 @@ def test_point_features_need_both_sides_farther_and_can_skip_tape():
     r[100:104] = 5.0
     r[104] = 5.2                    # the right neighbour continues the segment (jump < 0.3 m)
     r[105:140] = 4.0                # ... and then something NEARER: not standing in front
-    assert features.point_features(_scan(r)).count == 0
+    assert beacons.point_features(_scan(r)).count == 0
     r = np.full(361, 20.0)
     r[100:104] = 5.0
     level = np.zeros(361, dtype=np.uint8)
     level[101] = 3
-    assert features.point_features(_scan(r, level)).count == 1        # intensity ignored
-    assert features.point_features(_scan(r, level), exclude_tape=True).count == 0
-    assert features.point_features(_scan(r), max_range=4.0).count == 0
+    assert beacons.point_features(_scan(r, level)).count == 1        # intensity ignored
+    assert beacons.point_features(_scan(r, level), exclude_tape=True).count == 0
+    assert beacons.point_features(_scan(r), max_range=4.0).count == 0
 
 
-@pytest.mark.parametrize("kw, match", [(dict(max_width=0), "max_width"),
-                                       (dict(max_range_jump=float("nan")), "max_range_jump"),
-                                       (dict(min_range=40.0), "min_range"),
-                                       (dict(exclude_tape=1), "exclude_tape")])
-def test_point_features_bad_input(kw, match):
-    with pytest.raises(ValueError, match=match):
-        features.point_features(_scan(np.full(361, 20.0)), **kw)
-    with pytest.raises(ValueError, match="Laser"):
-        features.point_features(np.zeros((1, 361)))
+@pytest.mark.parametrize("kw, exc, match", [(dict(max_width=0), ValueError, "max_width"),
+                                            (dict(max_range_jump=float("nan")), ValueError,
+                                             "max_range_jump"),
+                                            (dict(min_range=40.0), ValueError, "min_range"),
+                                            (dict(exclude_tape=1), TypeError, "exclude_tape")])
+def test_point_features_bad_input(kw, exc, match):
+    with pytest.raises(exc, match=match):
+        beacons.point_features(_scan(np.full(361, 20.0)), **kw)
+    with pytest.raises(TypeError, match="Laser"):
+        beacons.point_features(np.zeros((1, 361)))
 
 
 # --------------------------------------------------------------------------- metrics
@@ -76,16 +84,16 @@ def test_heldout_map_rmse_uses_only_the_held_out_beacons():
     beacons = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]])
     mapped = beacons + np.array([[0.1, 0.0], [0.0, 0.3], [5.0, 5.0]])     # the third: no match
     res = SimpleNamespace(landmarks=mapped)
-    assert reproduce.heldout_map_rmse(res, beacons, [0, 1]) == pytest.approx(math.sqrt(0.05))
-    assert reproduce.heldout_map_rmse(res, beacons, [1]) == pytest.approx(0.3)
-    assert math.isnan(reproduce.heldout_map_rmse(res, beacons, [2]))
+    assert summary.heldout_map_rmse(res, beacons, [0, 1]) == pytest.approx(math.sqrt(0.05))
+    assert summary.heldout_map_rmse(res, beacons, [1]) == pytest.approx(0.3)
+    assert math.isnan(summary.heldout_map_rmse(res, beacons, [2]))
 
 
 def test_study_needs_beacons_and_raw_laser():
     with pytest.raises(ValueError, match="raw laser"):
-        reproduce.study(simulate.simulate(laps=1, raw_laser=False), seeds=1)
+        study.study(simulate.simulate(laps=1, raw_laser=False), seeds=1)
     with pytest.raises(ValueError, match="seeds"):
-        reproduce.study(simulate.simulate(laps=1), seeds=0)
+        study.study(simulate.simulate(laps=1), seeds=0)
 
 
 # --------------------------------------------------------------------------- the pipeline
@@ -93,7 +101,7 @@ def test_study_needs_beacons_and_raw_laser():
 @pytest.fixture(scope="module")
 def fast_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("fast")
-    res = reproduce.reproduce(out, fast=True, seeds=2, log=None)
+    res = report.reproduce(out, fast=True, seeds=2, log=None)
     return out, res
 
 
@@ -113,9 +121,9 @@ def test_reproduce_writes_the_figures_and_the_table(fast_run):
         data = (out / name).read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000, name
     rows = _csv(out / "results.csv")
-    assert list(rows) == [label for label, _ in reproduce.CONFIGURATIONS.values()]
+    assert list(rows) == [label for label, _ in study.CONFIGURATIONS.values()]
     md = (out / "results.md").read_text()
-    claims = reproduce.verdict(res["study"])
+    claims = study.verdict(res["study"])
     assert all(label in md for label in rows) and "## The paper's claims" in md
     assert md.count("\n|") == (2 + len(rows)) + (2 + len(claims))
     assert res["seconds"] < 60
@@ -126,22 +134,22 @@ def test_reproduce_numbers_equal_the_library_functions(fast_run):
     directly, following the documented protocol, not from reproduce's helpers."""
     out, _ = fast_run
     rows = _csv(out / "results.csv")
-    ds = reproduce.fast_dataset()
-    cfg = ekf_slam.SlamConfig.for_dataset("simulated")
-    plain = ekf_slam.run(ds, cfg)
+    ds = study.fast_dataset()
+    cfg = slam_config.SlamConfig.for_dataset("simulated")
+    plain = runner.run(ds, cfg)
     ts = ann.training_set(plain, ds)
     sp = ann.chronological_split(ts)
     t_h = ts.t[sp.test].min()
 
     def traj(res, late=False):
         odo = res.odometry_trajectory
-        return metrics.trajectory_errors(odo[odo[:, 0] >= t_h] if late else odo, ds.gps).rmse
+        return trajectory.trajectory_errors(odo[odo[:, 0] >= t_h] if late else odo, ds.gps).rmse
 
     def trace(res):
         return np.mean(res.pose_cov[:, 0, 0] + res.pose_cov[:, 1, 1])
 
     b = rows["beacons-only EKF-SLAM"]
-    m = map_metrics.map_errors(plain.landmarks, ds.beacons)
+    m = map_eval.map_errors(plain.landmarks, ds.beacons)
     expect = dict(map_rmse=m.rmse, map_rmse_aligned=m.rmse_aligned, traj_rmse=traj(plain),
                   traj_rmse_heldout=traj(plain, True), pose_trace=trace(plain),
                   landmarks=plain.landmarks.shape[0], matched=m.i_mapped.size, unmatched=m.spurious)
@@ -153,8 +161,8 @@ def test_reproduce_numbers_equal_the_library_functions(fast_run):
     per_seed = []
     for seed in (0, 1):
         model = ann.train(ts, sp, ann.TrainConfig(seed=seed))
-        r = ekf_slam.run(ds, cfg.replace(landmark_model="ann"), landmark_model=model)
-        per_seed.append((map_metrics.map_errors(r.landmarks, ds.beacons).rmse, traj(r, True),
+        r = runner.run(ds, cfg.replace(landmark_model="ann"), landmark_model=model)
+        per_seed.append((map_eval.map_errors(r.landmarks, ds.beacons).rmse, traj(r, True),
                          trace(r), model.sigma_range))
     per_seed = np.array(per_seed)
     a = rows["ANN-enhanced EKF-SLAM"]
@@ -163,20 +171,20 @@ def test_reproduce_numbers_equal_the_library_functions(fast_run):
         assert _num(a[k + "_sd"]) == pytest.approx(per_seed[:, j].std(ddof=1), rel=1e-9), k
     # Held-out beacons, seed 1: fold 1's network, scored on fold 1's test beacons only.
     fold = ann.beacon_folds(ts)[1]
-    rb = ekf_slam.run(ds, cfg.replace(landmark_model="ann"),
+    rb = runner.run(ds, cfg.replace(landmark_model="ann"),
                       landmark_model=ann.train(ts, fold, ann.TrainConfig(seed=1)))
     held = np.unique(ts.beacon[fold.test])
-    i, jt = map_metrics.match_landmarks(rb.landmarks, ds.beacons, 1.0)
+    i, jt = map_eval.match_landmarks(rb.landmarks, ds.beacons, 1.0)
     sel = np.isin(jt, held)
     e1 = np.sqrt(np.mean(np.sum((rb.landmarks[i[sel]] - ds.beacons[jt[sel]]) ** 2, axis=1)))
     st = fast_run[1]["study"]
     assert st.values("ann", "map_rmse_heldout")[1] == pytest.approx(e1, rel=1e-12)
     # The control is the plain filter with seed 0's R'.
-    ctrl = ekf_slam.run(ds, cfg.replace(sigma_range=per_seed[0, 3],
+    ctrl = runner.run(ds, cfg.replace(sigma_range=per_seed[0, 3],
                                         sigma_bearing=st.models["ann"][0].sigma_bearing))
     assert st.values("control", "pose_trace")[0] == pytest.approx(trace(ctrl), rel=1e-12)
     # Natural features: the point features of the raw laser, the tentative-landmark filter.
-    nat = ekf_slam.run(dataclasses.replace(ds, detections=features.point_features(ds.laser)),
+    nat = runner.run(dataclasses.replace(ds, detections=beacons.point_features(ds.laser)),
                        cfg.replace(feature_source="detections", landmark_min_observations=3))
     n = rows["natural-feature EKF-SLAM"]
     assert _num(n["traj_rmse"]) == pytest.approx(traj(nat), rel=1e-12)
@@ -201,12 +209,12 @@ def test_cli_arguments():
         with pytest.raises(SystemExit):
             build_parser().parse_args(bad)
     with pytest.raises(ValueError, match="seeds"):
-        reproduce.reproduce("unused", seeds=0)
+        report.reproduce("unused", seeds=0)
 
 
 def test_verdict_rows_follow_the_numbers(fast_run):
     st = fast_run[1]["study"]
-    rows = reproduce.verdict(st)
+    rows = study.verdict(st)
     assert all(set(r) == {"claim", "measured", "holds", "why"} for r in rows)
     first = rows[0]
     assert f"ANN {st.mean('ann', 'pose_trace'):.4f}" in first["measured"]
@@ -218,12 +226,12 @@ def test_verdict_rows_follow_the_numbers(fast_run):
 # --------------------------------------------------------------------------- simulator transfer
 
 def test_transfer_matches_direct_runs():
-    tr = reproduce.transfer({"range_bias": 0.3}, test_route="loop", seeds=(1,))
+    tr = study.transfer({"range_bias": 0.3}, test_route="loop", seeds=(1,))
     ds = simulate.simulate(seed=1, route="loop", beacon_seed=1, raw_laser=False, range_bias=0.3)
-    cfg = ekf_slam.SlamConfig.for_dataset("simulated")
-    plain = map_metrics.map_errors(ekf_slam.run(ds, cfg).landmarks, ds.beacons)
+    cfg = slam_config.SlamConfig.for_dataset("simulated")
+    plain = map_eval.map_errors(runner.run(ds, cfg).landmarks, ds.beacons)
     assert tr.plain[0] == pytest.approx(plain.rmse, rel=1e-12)
     assert tr.ann[0] < 0.8 * tr.plain[0]          # the bias is learned on the same route
     assert tr.ratio == pytest.approx(tr.ann[0] / tr.plain[0])
     with pytest.raises(ValueError, match="unknown SimConfig"):
-        reproduce.transfer({"range_offset": 0.3})
+        study.transfer({"range_offset": 0.3})

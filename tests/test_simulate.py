@@ -8,11 +8,10 @@ import time
 import numpy as np
 import pytest
 
-from annslam_lib.kinematics import axle_pose, axle_speed, laser_velocity, predict, predict_exact
-from annslam_lib.observation import observe
-from annslam_lib.records import LASER_ANGLES
-from annslam_lib.simulate import (GPS_DT, LASER_DT, MAX_STEER, NO_RETURN, ODOMETRY_DT, ROUTES,
-                                  SimConfig, make_route, simulate)
+from annslam_lib.models.motion import axle_pose, axle_speed, laser_velocity, predict, predict_exact
+from annslam_lib.models.observation import observe
+from annslam_lib.data.records import LASER_ANGLES
+from annslam_lib.data.simulate import GPS_DT, LASER_DT, MAX_STEER, NO_RETURN, ODOMETRY_DT, ROUTES, SimConfig, make_route, simulate
 
 NOISELESS = dict(sigma_speed=0.0, sigma_steer=0.0, sigma_range=0.0, sigma_bearing=0.0,
                  sigma_gps=0.0)
@@ -329,14 +328,15 @@ def test_raw_laser_applies_systematic_range_error():
     (dict(n_beacons=60, beacon_min_sep=10.0), "n_beacons"),
 ])
 def test_bad_config_raises_value_error_naming_it(bad, name):
-    with pytest.raises(ValueError, match=name):
+    kind = TypeError if bad == dict(seed=1.5) else ValueError      # a float seed: wrong type
+    with pytest.raises(kind, match=name):
         simulate(raw_laser=False, **bad)
 
 
 def test_bad_beacons_and_config_type():
     with pytest.raises(ValueError, match="beacons"):
         simulate(beacons=np.zeros((3, 3)))
-    with pytest.raises(ValueError, match="config"):
+    with pytest.raises(TypeError, match="config"):
         simulate({"seed": 1})
 
 

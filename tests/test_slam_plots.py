@@ -12,14 +12,18 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from scipy.stats import chi2  # noqa: E402
 
-from annslam_lib import ekf_slam, simulate, slam_plots  # noqa: E402
-from annslam_lib.ekf_slam import SlamConfig  # noqa: E402
+  # noqa: E402
+from annslam_lib.slam.config import SlamConfig  # noqa: E402
+from annslam_lib.data import simulate
+from annslam_lib.evaluation import consistency
+from annslam_lib.plots import slam as slam_plots
+from annslam_lib.slam import runner
 
 
 @pytest.fixture(scope="module")
 def sim_run():
     ds = simulate.simulate(seed=5, raw_laser=False, laps=1)
-    return ds, ekf_slam.run(ds, SlamConfig.for_dataset("simulated"), progress=False)
+    return ds, runner.run(ds, SlamConfig.for_dataset("simulated"), progress=False)
 
 
 # --------------------------------------------------------------------------- bands
@@ -28,7 +32,7 @@ def sim_run():
 def test_chi2_band_covers_95_percent_of_sampled_averages(dof, n):
     """The band of the average of n chi2(dof) values, checked by sampling such averages:
     2.5 % below, 2.5 % above (20 000 samples: the binomial sd is 0.11 %, the tolerance 0.5 %)."""
-    lo, hi = slam_plots.chi2_band(dof, n)
+    lo, hi = consistency.chi2_band(dof, n)
     rng = np.random.default_rng(dof * 1000 + n)
     avg = rng.chisquare(dof, size=(20_000, n)).mean(axis=1)
     assert np.mean(avg < lo) == pytest.approx(0.025, abs=0.005)
@@ -36,30 +40,30 @@ def test_chi2_band_covers_95_percent_of_sampled_averages(dof, n):
 
 
 def test_chi2_band_values_and_broadcasting():
-    lo, hi = slam_plots.chi2_band(3, 50)
+    lo, hi = consistency.chi2_band(3, 50)
     assert (round(lo, 2), round(hi, 2)) == (2.36, 3.72)          # the notebook's band
-    lo_a, hi_a = slam_plots.chi2_band(1, np.array([2.0, 20.0, 2000.0]))
+    lo_a, hi_a = consistency.chi2_band(1, np.array([2.0, 20.0, 2000.0]))
     assert lo_a.shape == (3,) and np.all(np.diff(hi_a - lo_a) < 0)  # narrower with more dof
     np.testing.assert_allclose(lo_a, chi2.ppf(0.025, [2, 20, 2000]) / [2, 20, 2000])
-    lo99, hi99 = slam_plots.chi2_band(3, 50, prob=0.99)
+    lo99, hi99 = consistency.chi2_band(3, 50, prob=0.99)
     assert lo99 < lo < hi < hi99
 
 
 @pytest.mark.parametrize("kwargs, match", [
     (dict(dof=0, n=3), "positive"), (dict(dof=3, n=-1), "positive"),
     (dict(dof=np.nan, n=3), "positive"), (dict(dof=3, n=3, prob=1.0), "probability"),
-    (dict(dof=3, n=3, prob=True), "probability"),
+    (dict(dof=3, n=3, prob=True), "prob"),
 ])
 def test_chi2_band_rejects_bad_input(kwargs, match):
-    with pytest.raises(ValueError, match=match):
-        slam_plots.chi2_band(**kwargs)
+    with pytest.raises(TypeError if kwargs.get("prob") is True else ValueError, match=match):
+        consistency.chi2_band(**kwargs)
 
 
 # --------------------------------------------------------------------------- consistency
 
 def test_nees_consistency_by_hand():
     runs = [np.array([1.0, 3.0, 10.0]), np.array([2.0, 3.0, 4.0])]
-    c = slam_plots.nees_consistency(runs, t=[0.0, 1.0, 2.0], dof=3)
+    c = consistency.nees_consistency(runs, t=[0.0, 1.0, 2.0], dof=3)
     lo, hi = chi2.ppf([0.025, 0.975], 6) / 2
     np.testing.assert_allclose(c.value, [1.5, 3.0, 7.0])
     assert c.mean == pytest.approx(11.5 / 3)
@@ -71,7 +75,7 @@ def test_nees_consistency_by_hand():
 def test_nis_consistency_by_hand():
     nis = [np.array([4.0, 0.0, 1.0]), np.array([2.0, 0.0, 5.0])]
     dof = [np.array([2.0, 0.0, 2.0]), np.array([4.0, 0.0, 2.0])]
-    c = slam_plots.nis_consistency(nis, dof, t=[10.0, 11.0, 12.0])
+    c = consistency.nis_consistency(nis, dof, t=[10.0, 11.0, 12.0])
     np.testing.assert_allclose(c.t, [10.0, 12.0])                   # scan without updates dropped
     np.testing.assert_allclose(c.value, [6.0 / 6.0, 6.0 / 4.0])
     np.testing.assert_allclose(c.dof, [6.0, 4.0])
@@ -81,33 +85,33 @@ def test_nis_consistency_by_hand():
 
 def test_consistency_rejects_mismatched_runs():
     with pytest.raises(ValueError, match="different lengths"):
-        slam_plots.nees_consistency([np.ones(3), np.ones(4)])
+        consistency.nees_consistency([np.ones(3), np.ones(4)])
     with pytest.raises(ValueError, match="no runs"):
-        slam_plots.nees_consistency([])
+        consistency.nees_consistency([])
     with pytest.raises(ValueError, match="non-finite"):
-        slam_plots.nees_consistency([np.array([1.0, np.nan])])
+        consistency.nees_consistency([np.array([1.0, np.nan])])
     with pytest.raises(ValueError, match="differ in shape"):
-        slam_plots.nis_consistency([np.ones(3)], [np.ones(3), np.ones(3)])
+        consistency.nis_consistency([np.ones(3)], [np.ones(3), np.ones(3)])
     with pytest.raises(ValueError, match="no scan has an update"):
-        slam_plots.nis_consistency([np.zeros(3)], [np.zeros(3)])
+        consistency.nis_consistency([np.zeros(3)], [np.zeros(3)])
     with pytest.raises(ValueError, match="t must have shape"):
-        slam_plots.nees_consistency([np.ones(3)], t=[0.0, 1.0])
+        consistency.nees_consistency([np.ones(3)], t=[0.0, 1.0])
 
 
 def test_scan_nis_follows_the_result_log(sim_run):
     ds, r = sim_run
-    s, d = slam_plots.scan_nis(r, len(ds.detections))
+    s, d = consistency.scan_nis(r, len(ds.detections))
     laser = r.nis["kind"] == 0
     assert s.sum() == pytest.approx(r.nis["nis"][laser].sum())
     assert d.sum() == r.nis["dof"][laser].sum() == 2 * r.counts["associated"]
     k = int(r.nis["scan"][laser][7])
     assert s[k] == r.nis["nis"][laser][7] and d[k] == r.nis["dof"][laser][7]
     with pytest.raises(ValueError, match="outside"):
-        slam_plots.scan_nis(r, 10)
+        consistency.scan_nis(r, 10)
 
 
 def test_plot_consistency_draws_the_statistic_and_its_band():
-    c = slam_plots.nees_consistency([np.array([1.0, 3.0, 5.0])] * 4, t=[0.0, 1.0, 2.0])
+    c = consistency.nees_consistency([np.array([1.0, 3.0, 5.0])] * 4, t=[0.0, 1.0, 2.0])
     ax = slam_plots.plot_consistency(c, expected=3.0)
     (line, expected) = ax.get_lines()
     np.testing.assert_allclose(line.get_ydata(), [1.0, 3.0, 5.0])
@@ -121,23 +125,23 @@ def test_plot_consistency_draws_the_statistic_and_its_band():
 
 def test_correlation_matrix_values_and_errors():
     P = np.array([[4.0, 2.0, 0.0], [2.0, 9.0, -3.0], [0.0, -3.0, 1.0]])
-    C = slam_plots.correlation_matrix(P)
+    C = consistency.correlation_matrix(P)
     np.testing.assert_allclose(C, [[1, 2 / 6, 0], [2 / 6, 1, -1], [0, -1, 1]])
     with pytest.raises(ValueError, match="non-positive variance at index 1"):
-        slam_plots.correlation_matrix(np.diag([1.0, 0.0]))
+        consistency.correlation_matrix(np.diag([1.0, 0.0]))
     with pytest.raises(ValueError, match="not symmetric"):
-        slam_plots.correlation_matrix(np.array([[1.0, 0.5], [0.0, 1.0]]))
+        consistency.correlation_matrix(np.array([[1.0, 0.5], [0.0, 1.0]]))
     with pytest.raises(ValueError, match="square"):
-        slam_plots.correlation_matrix(np.ones((2, 3)))
+        consistency.correlation_matrix(np.ones((2, 3)))
     with pytest.raises(ValueError, match="NaN"):
-        slam_plots.correlation_matrix(np.array([[1.0, np.nan], [np.nan, 1.0]]))
+        consistency.correlation_matrix(np.array([[1.0, np.nan], [np.nan, 1.0]]))
 
 
 def test_plot_correlation_image_is_the_correlation_matrix(sim_run):
     _, r = sim_run
     ax = slam_plots.plot_correlation(r.covariance)
     img = ax.get_images()[0]
-    np.testing.assert_allclose(img.get_array(), slam_plots.correlation_matrix(r.covariance))
+    np.testing.assert_allclose(img.get_array(), consistency.correlation_matrix(r.covariance))
     assert img.get_clim() == (-1.0, 1.0)
     plt.close("all")
 

@@ -13,8 +13,9 @@ import nbformat
 import pytest
 from nbclient import NotebookClient
 
-from annslam_lib import release
+
 from annslam_lib.grading import NOT_WRITTEN
+from annslam_lib.course import release
 
 ROOT = Path(__file__).resolve().parents[1]
 GRADED = [p for p in sorted((ROOT / "notebooks").glob("*.ipynb")) if release.exercises(p)]

@@ -5,10 +5,11 @@ import math
 import numpy as np
 import pytest
 
-from annslam_lib import timing
-from annslam_lib.ekf_dense import DenseEkfSlam
-from annslam_lib.ekf_slam import EkfSlam
-from annslam_lib.observation import inverse_observe
+
+from annslam_lib.slam.dense import DenseEkfSlam
+from annslam_lib.slam.efficient import EkfSlam
+from annslam_lib.models.observation import inverse_observe
+from annslam_lib.evaluation import timing
 
 
 def test_random_filter_holds_the_drawn_landmarks_in_both_classes():
@@ -86,5 +87,7 @@ def test_loglog_slope_recovers_power_laws():
     (lambda: timing.loglog_slope([2, 2], [1, 3]), "all equal"),
 ])
 def test_bad_input_is_a_clear_error(call, match):
-    with pytest.raises(ValueError, match=match):
+    # wrong types (a class that is no filter, a float count) raise TypeError
+    kind = TypeError if match in ("cls must be", "n_landmarks") else ValueError
+    with pytest.raises(kind, match=match):
         call()

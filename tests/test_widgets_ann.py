@@ -3,14 +3,14 @@ import matplotlib
 
 matplotlib.use("Agg")
 
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
 
-pytest.importorskip("torch")
+from annslam_lib import ann
+from annslam_lib.ann import evaluation
+from annslam_lib.chapters import ch07_ann_training as ch07
 
-from annslam_lib import ann  # noqa: E402
-from annslam_lib.widgets import ann as wann  # noqa: E402
 
 
 def _synthetic_set(n_scans: int = 90, bias: float = 0.3, seed: int = 3) -> ann.TrainingSet:
@@ -37,7 +37,7 @@ def ts():
 @pytest.fixture(scope="module")
 def grid(ts):
     cfg = ann.TrainConfig(max_epochs=25)
-    return wann.hidden_size_grid(ts, hidden=(1, 4), seeds=(0, 2), config=cfg), cfg
+    return evaluation.hidden_size_grid(ts, hidden=(1, 4), seeds=(0, 2), config=cfg), cfg
 
 
 @pytest.fixture(autouse=True)
@@ -68,17 +68,17 @@ def test_grid_holds_the_numbers_of_independent_training(ts, grid):
 
 
 def test_grid_without_leave_beacons_out(ts):
-    g = wann.hidden_size_grid(ts, hidden=(2,), seeds=(1,), config=ann.TrainConfig(max_epochs=5),
+    g = evaluation.hidden_size_grid(ts, hidden=(2,), seeds=(1,), config=ann.TrainConfig(max_epochs=5),
                               leave_beacons_out=False)
     assert np.isnan(g.lbo).all() and np.isnan(g.lbo_base) and np.isfinite(g.chrono).all()
-    fig = wann.plot_hidden_grid(g)
+    fig = ch07.plot_hidden_grid(g)
     gids = [ln.get_gid() for ln in fig.axes[0].lines]
     assert "mean_chronological test" in gids and "mean_leave-beacons-out" not in gids
 
 
 def test_plot_hidden_grid_shows_means_and_baselines(grid):
     g, _ = grid
-    fig = wann.plot_hidden_grid(g, hidden=4, seed=2)
+    fig = ch07.plot_hidden_grid(g, hidden=4, seed=2)
     lines = {ln.get_gid(): ln for ln in fig.axes[0].lines}
     np.testing.assert_allclose(lines["mean_chronological test"].get_ydata(), g.chrono.mean(axis=1))
     np.testing.assert_allclose(lines["mean_leave-beacons-out"].get_ydata(), g.lbo.mean(axis=1))
@@ -90,8 +90,8 @@ def test_plot_hidden_grid_shows_means_and_baselines(grid):
 def test_explorer_follows_the_sliders(grid, monkeypatch):
     g, _ = grid
     shown = []
-    monkeypatch.setattr(wann, "show_widget_figure", shown.append)
-    w = wann.hidden_size_explorer(g, hidden=1, seed=0)
+    monkeypatch.setattr(ch07, "show_widget_figure", shown.append)
+    w = ch07.hidden_size_explorer(g, hidden=1, seed=0)
     # the plots are redrawn on release only, not at every intermediate slider position
     assert w.children[0].continuous_update is False and w.children[1].continuous_update is False
     s = w.holder["summary"]
@@ -117,16 +117,16 @@ def test_explorer_follows_the_sliders(grid, monkeypatch):
 def test_bad_input(ts, grid):
     g, _ = grid
     with pytest.raises(ValueError, match="not in the grid"):
-        wann.grid_summary(g, 3, 0)
+        evaluation.grid_summary(g, 3, 0)
     with pytest.raises(ValueError, match="seed"):
-        wann.hidden_size_explorer(g, hidden=1, seed=7)
+        ch07.hidden_size_explorer(g, hidden=1, seed=7)
     with pytest.raises(ValueError, match="HiddenSizeGrid"):
-        wann.hidden_size_explorer(object())
+        ch07.hidden_size_explorer(object())
     with pytest.raises(ValueError, match="hidden"):
-        wann.hidden_size_grid(ts, hidden=(0, 2))
+        evaluation.hidden_size_grid(ts, hidden=(0, 2))
     with pytest.raises(ValueError, match="seeds"):
-        wann.hidden_size_grid(ts, seeds=(1, 1))
-    with pytest.raises(ValueError, match="TrainingSet"):
-        wann.hidden_size_grid(np.zeros((3, 12)))
-    with pytest.raises(ValueError, match="TrainConfig"):
-        wann.hidden_size_grid(ts, config={"hidden": (3,)})
+        evaluation.hidden_size_grid(ts, seeds=(1, 1))
+    with pytest.raises(TypeError, match="TrainingSet"):
+        evaluation.hidden_size_grid(np.zeros((3, 12)))
+    with pytest.raises(TypeError, match="TrainConfig"):
+        evaluation.hidden_size_grid(ts, config={"hidden": (3,)})

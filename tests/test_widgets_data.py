@@ -10,8 +10,12 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 import scipy.io  # noqa: E402
 
-from annslam_lib import fetch, plotting, simulate, widgets  # noqa: E402
-from annslam_lib.widgets.data import scan_readout  # noqa: E402
+  # noqa: E402
+from annslam_lib.chapters.ch00_course_map import scan_readout  # noqa: E402
+from annslam_lib.chapters import ch00_course_map as ch00
+from annslam_lib.data import fetch
+from annslam_lib.data import simulate
+from annslam_lib.plots import data as data_plots
 
 READOUT = re.compile(r"scan (\d+)  t = ([\d.]+) s  returns (\d+)  bright beams (\d+)"
                      r"(?: \(([\d.]+)-([\d.]+) m\))?")
@@ -20,7 +24,7 @@ READOUT = re.compile(r"scan (\d+)  t = ([\d.]+) s  returns (\d+)  bright beams (
 def test_scan_summary_counts_match_the_raw_file(car_park):
     raw = scipy.io.loadmat(fetch.dataset_dir("car_park") / "data_set.mat")
     k = 150
-    s = widgets.scan_summary(car_park.laser, k, max_range=20)
+    s = ch00.scan_summary(car_park.laser, k, max_range=20)
     assert s["bright_beams"] == np.count_nonzero(raw["Intensity"][k] > 0) == 2
     assert s["returns"] == np.count_nonzero(raw["Laser"][k] < 20)
     assert s["t"] == pytest.approx(raw["TimeLaser"].ravel()[k] - car_park.info["time_offset_s"], abs=1e-9)
@@ -29,10 +33,10 @@ def test_scan_summary_counts_match_the_raw_file(car_park):
 
 
 def test_scan_scrubber_follows_the_slider(car_park):
-    w = widgets.scan_scrubber(car_park, start=10)
+    w = ch00.scan_scrubber(car_park, start=10)
     assert w.holder["summary"]["scan"] == 10
     w.children[0].value = 300
-    assert w.holder["summary"] == widgets.scan_summary(car_park.laser, 300, max_range=20)
+    assert w.holder["summary"] == ch00.scan_summary(car_park.laser, 300, max_range=20)
     assert w.children[0].max == len(car_park.laser) - 1
     plt.close("all")
 
@@ -50,7 +54,7 @@ def test_scan_scrubber_prints_the_readout_the_raw_file_implies(car_park, capsys)
     raw = scipy.io.loadmat(fetch.dataset_dir("car_park") / "data_set.mat")
     t_raw = raw["TimeLaser"].ravel() - car_park.info["time_offset_s"]
     plt.close("all")
-    w = widgets.scan_scrubber(car_park, start=150)
+    w = ch00.scan_scrubber(car_park, start=150)
     capsys.readouterr()  # the first drawing (scan 150)
     seen = {}
     for k in (151, 300):
@@ -58,7 +62,7 @@ def test_scan_scrubber_prints_the_readout_the_raw_file_implies(car_park, capsys)
         # Outside a kernel stdout also holds clear_output's escape codes and the figure's repr.
         (printed,) = re.findall(r"scan \d+ .*", capsys.readouterr().out)
         assert printed == w.holder["readout"] == scan_readout(
-            widgets.scan_summary(car_park.laser, k, max_range=20))
+            ch00.scan_summary(car_park.laser, k, max_range=20))
         m = READOUT.fullmatch(printed)
         assert m, printed
         assert int(m[1]) == k
@@ -76,9 +80,9 @@ def test_scan_scrubber_prints_the_readout_the_raw_file_implies(car_park, capsys)
 
 def test_scan_scrubber_and_summary_reject_bad_input(victoria_park, car_park):
     with pytest.raises(ValueError, match="no raw laser"):
-        widgets.scan_scrubber(victoria_park)
+        ch00.scan_scrubber(victoria_park)
     with pytest.raises(IndexError, match="outside 0..585"):
-        widgets.scan_summary(car_park.laser, 586)
+        ch00.scan_summary(car_park.laser, 586)
 
 
 def test_scan_plot_puts_tape_returns_in_the_vehicle_frame():
@@ -87,7 +91,7 @@ def test_scan_plot_puts_tape_returns_in_the_vehicle_frame():
     ds = simulate.simulate(seed=1, beacons=np.array([[0.0, 0.0]]), sigma_range=0.0,
                            sigma_bearing=0.0, laps=1)
     k = int(np.argmax((ds.laser.intensity > 0).sum(axis=1)))
-    ax = plotting.plot_scan_vehicle_frame(ds.laser, k, ds.vehicle, max_range=30)
+    ax = data_plots.plot_scan_vehicle_frame(ds.laser, k, ds.vehicle, max_range=30)
     bright = ax.collections[0].get_offsets()
     r, beta = ds.laser.ranges[k], ds.laser.angles
     hit = ds.laser.intensity[k] > 0

@@ -6,15 +6,16 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
-from annslam_lib.vehicle import ACFR_UTE, Vehicle
-from annslam_lib.widgets import kinematics as wk
+from annslam_lib.models.vehicle import ACFR_UTE, Vehicle
+from annslam_lib.chapters import ch01_kinematics as ch01
+
 
 matplotlib.use("Agg")
 
 
 @pytest.fixture
 def explorer():
-    w = wk.kinematics_explorer(speed=2.0, steering=0.3, dt=0.2)
+    w = ch01.kinematics_explorer(speed=2.0, steering=0.3, dt=0.2)
     yield w
     plt.close("all")
 
@@ -74,7 +75,7 @@ def test_speed_slider_scales_the_path(explorer):
 
 
 def test_arc_vs_euler_rear_axle_is_the_2_2_model():
-    s = wk.arc_vs_euler(1.5, -0.3, 0.1, Vehicle(), horizon=1.0)
+    s = ch01.arc_vs_euler(1.5, -0.3, 0.1, Vehicle(), horizon=1.0)
     eu = s["euler_axle"]
     w = 1.5 * math.tan(-0.3) / ACFR_UTE.L
     expect = [0.0, 0.0, 0.0]
@@ -85,12 +86,12 @@ def test_arc_vs_euler_rear_axle_is_the_2_2_model():
 
 
 def test_circumradius_and_bad_input():
-    assert wk.circumradius([1, 0], [0, 1], [-1, 0]) == pytest.approx(1.0, abs=1e-15)
-    assert math.isinf(wk.circumradius([0, 0], [1, 1], [2, 2]))
+    assert ch01.circumradius([1, 0], [0, 1], [-1, 0]) == pytest.approx(1.0, abs=1e-15)
+    assert math.isinf(ch01.circumradius([0, 0], [1, 1], [2, 2]))
     for kwargs in (dict(dt=0.0), dict(dt=float("nan")), dict(horizon=-1.0), dict(dt=1e-6)):
         args = dict(speed=1.0, steering=0.1, dt=0.1) | kwargs
         with pytest.raises(ValueError):
-            wk.arc_vs_euler(**args)
+            ch01.arc_vs_euler(**args)
 
 
 def test_sliders_redraw_only_on_release(explorer):

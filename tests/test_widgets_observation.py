@@ -9,8 +9,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
+from annslam_lib.chapters import ch03_observation as ch03
 
-from annslam_lib.widgets import observation as wobs  # noqa: E402
+  # noqa: E402
 
 
 @pytest.fixture(autouse=True)
@@ -31,12 +32,12 @@ def reference_measurements(pose, landmark, P, R, n, seed):
 
 @pytest.mark.parametrize("landmark", [(10.0, 3.0), (-4.0, 6.0), (25.0, -12.0)])
 def test_S_matches_independent_monte_carlo_at_small_sigma(landmark):
-    s = wobs.measurement_prediction(*landmark, sigma_xy=0.05, sigma_phi=math.radians(1.0),
+    s = ch03.measurement_prediction(*landmark, sigma_xy=0.05, sigma_phi=math.radians(1.0),
                                     sigma_landmark=0.05)
     d = complex(*landmark)
     assert s["range"] == pytest.approx(abs(d), rel=1e-12)
     assert s["bearing"] == pytest.approx(np.angle(d * 1j), abs=1e-12)
-    z = reference_measurements(wobs.POSE, landmark, s["P"], s["R"], 200_000, seed=11)
+    z = reference_measurements(ch03.POSE, landmark, s["P"], s["R"], 200_000, seed=11)
     e = z - s["z"]
     e[:, 1] = np.angle(np.exp(1j * e[:, 1]))
     C = np.cov(e, rowvar=False)
@@ -49,7 +50,7 @@ def test_S_matches_independent_monte_carlo_at_small_sigma(landmark):
 
 def test_heading_enters_the_bearing_linearly():
     """With only heading and laser noise, S is exactly diag(sr^2, sphi^2 + sb^2)."""
-    s = wobs.measurement_prediction(8.0, -2.0, sigma_xy=0.0, sigma_phi=0.3, sigma_range=0.1,
+    s = ch03.measurement_prediction(8.0, -2.0, sigma_xy=0.0, sigma_phi=0.3, sigma_range=0.1,
                                     sigma_bearing=0.02)
     np.testing.assert_allclose(s["S"], np.diag([0.1**2, 0.3**2 + 0.02**2]), atol=1e-15)
 
@@ -58,7 +59,7 @@ def test_position_sigma_shrinks_in_bearing_with_range():
     """Position noise sigma perpendicular to the line of sight moves the bearing by
     sigma / r: the bearing variance from position alone is sigma^2 / r^2."""
     for r in (2.0, 10.0, 40.0):
-        s = wobs.measurement_prediction(r, 0.0, sigma_xy=0.4, sigma_phi=0.0, sigma_range=0.0,
+        s = ch03.measurement_prediction(r, 0.0, sigma_xy=0.4, sigma_phi=0.0, sigma_range=0.0,
                                         sigma_bearing=0.0)
         np.testing.assert_allclose(s["S"], np.diag([0.4**2, 0.4**2 / r**2]), rtol=1e-12,
                                    atol=1e-15)
@@ -66,11 +67,11 @@ def test_position_sigma_shrinks_in_bearing_with_range():
 
 def test_bad_input_is_rejected():
     with pytest.raises(ValueError, match="sigma_xy"):
-        wobs.measurement_prediction(5.0, 0.0, sigma_xy=-0.1, sigma_phi=0.1)
+        ch03.measurement_prediction(5.0, 0.0, sigma_xy=-0.1, sigma_phi=0.1)
     with pytest.raises(ValueError, match="sigma_phi"):
-        wobs.measurement_prediction(5.0, 0.0, sigma_xy=0.1, sigma_phi=float("nan"))
+        ch03.measurement_prediction(5.0, 0.0, sigma_xy=0.1, sigma_phi=float("nan"))
     with pytest.raises(ValueError, match="bearing undefined"):
-        wobs.measurement_prediction(0.0, 0.0, sigma_xy=0.1, sigma_phi=0.1)
+        ch03.measurement_prediction(0.0, 0.0, sigma_xy=0.1, sigma_phi=0.1)
 
 
 def sliders(w):
@@ -78,7 +79,7 @@ def sliders(w):
 
 
 def test_explorer_summary_follows_the_sliders():
-    w = wobs.measurement_explorer(landmark=(10.0, 0.0), sigma_xy=0.3, sigma_phi_deg=2.0,
+    w = ch03.measurement_explorer(landmark=(10.0, 0.0), sigma_xy=0.3, sigma_phi_deg=2.0,
                                   n_samples=4000)
     s0 = w.holder["summary"]
     assert s0["range"] == pytest.approx(10.0) and s0["bearing"] == pytest.approx(np.pi / 2)
@@ -114,7 +115,7 @@ def test_explorer_summary_follows_the_sliders():
 def test_explorer_shows_the_linearisation_failing_close_to_a_vague_pose():
     """Landmark 0.5 m away, position sigma 0.5 m: the true bearing spread is far wider
     and the range spread narrower than the Jacobian predicts (a Rice-like range)."""
-    w = wobs.measurement_explorer(landmark=(0.5, 0.0), sigma_xy=0.5, sigma_phi_deg=0.0,
+    w = ch03.measurement_explorer(landmark=(0.5, 0.0), sigma_xy=0.5, sigma_phi_deg=0.0,
                                   n_samples=4000)
     ratio = w.holder["summary"]["mc_sd_ratio"]
     assert ratio[0] < 0.85 and ratio[1] > 1.05
@@ -122,7 +123,7 @@ def test_explorer_shows_the_linearisation_failing_close_to_a_vague_pose():
 
 def test_sliders_wait_for_release():
     """Each move redraws a Monte-Carlo cloud: no update while a slider is dragged."""
-    w = wobs.measurement_explorer(n_samples=500)
+    w = ch03.measurement_explorer(n_samples=500)
     assert len(sliders(w)) == 5
     assert all(s.continuous_update is False for s in sliders(w).values())
 
@@ -131,7 +132,7 @@ def test_landmark_sigma_slider_adds_its_variance_through_H_m():
     """The range row of H_m is the unit line-of-sight vector and the bearing row has norm
     1/r, so an isotropic landmark sigma adds sigma^2 to the range variance and
     sigma^2 / r^2 to the bearing variance, and nothing to their covariance."""
-    w = wobs.measurement_explorer(landmark=(6.0, 8.0), sigma_xy=0.2, sigma_phi_deg=3.0,
+    w = ch03.measurement_explorer(landmark=(6.0, 8.0), sigma_xy=0.2, sigma_phi_deg=3.0,
                                   n_samples=500)
     s0 = w.holder["summary"]
     sliders(w)["σ landmark"].value = 0.5

@@ -11,18 +11,25 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from annslam_lib import ekf_slam, map_metrics, metrics, simulate  # noqa: E402
-from annslam_lib.ekf_slam import SlamConfig  # noqa: E402
-from annslam_lib.widgets import slam as ws  # noqa: E402
+  # noqa: E402
+from annslam_lib.slam.config import SlamConfig  # noqa: E402
+from annslam_lib.chapters import ch05_ekf_slam as ch05
+from annslam_lib.data import records
+from annslam_lib.data import simulate
+from annslam_lib.evaluation import consistency
+from annslam_lib.evaluation import map as map_eval
+from annslam_lib.evaluation import trajectory
+from annslam_lib.slam import runner
+  # noqa: E402
 
 
 @pytest.fixture(scope="module")
 def full_run(car_park):
-    return ekf_slam.run(car_park, progress=False)
+    return runner.run(car_park, progress=False)
 
 
 def test_truncate_keeps_exactly_the_data_up_to_t_end(car_park):
-    cut = ws.truncate(car_park, 40.0)
+    cut = records.truncate(car_park, 40.0)
     assert cut.odometry.t[-1] <= 40.0 < car_park.odometry.t[len(cut.odometry)]
     assert cut.laser.t[-1] <= 40.0 < car_park.laser.t[len(cut.laser)]
     assert cut.gps.t[-1] <= 40.0 < car_park.gps.t[len(cut.gps)]
@@ -32,31 +39,31 @@ def test_truncate_keeps_exactly_the_data_up_to_t_end(car_park):
 
 def test_truncate_simulated_detections_and_truth():
     ds = simulate.simulate(seed=2, raw_laser=False, laps=1)
-    cut = ws.truncate(ds, 20.0)
+    cut = records.truncate(ds, 20.0)
     n = len(cut.detections)
     assert ds.detections.t[n - 1] <= 20.0 < ds.detections.t[n]
     assert cut.detections.count == ds.detections.offsets[n]
     np.testing.assert_array_equal(cut.detections.landmark_id, ds.detections.landmark_id[:cut.detections.count])
     assert len(cut.info["scan_poses"]) == n and cut.truth.poses[-1, 0] <= 20.0
-    r = ekf_slam.run(cut, SlamConfig.for_dataset("simulated"), progress=False)
-    assert ekf_slam.pose_nees(r, cut).shape == (n,)
+    r = runner.run(cut, SlamConfig.for_dataset("simulated"), progress=False)
+    assert consistency.pose_nees(r, cut).shape == (n,)
 
 
 def test_truncate_rejects_bad_input(car_park):
     with pytest.raises(ValueError, match="before the first odometry"):
-        ws.truncate(car_park, -1.0)
-    with pytest.raises(ValueError, match="finite time"):
-        ws.truncate(car_park, math.nan)
-    with pytest.raises(ValueError, match="records.Dataset"):
-        ws.truncate("car_park", 10.0)
-    with pytest.raises(ValueError, match="records.Dataset"):
-        ws.slam_summary("car_park")
+        records.truncate(car_park, -1.0)
+    with pytest.raises(ValueError, match="t_end must be a finite number"):
+        records.truncate(car_park, math.nan)
+    with pytest.raises(TypeError, match="records.Dataset"):
+        records.truncate("car_park", 10.0)
+    with pytest.raises(TypeError, match="records.Dataset"):
+        ch05.slam_summary("car_park")
 
 
 def test_a_cut_run_is_the_full_run_up_to_that_time(car_park, full_run):
     """Causality: the filter on the data up to 40 s reproduces the full run's trajectory
     up to 40 s exactly (same initial pose: fitted once on the whole run)."""
-    s = ws.slam_summary(car_park, t_end=40.0)
+    s = ch05.slam_summary(car_park, t_end=40.0)
     r = s["result"]
     k = len(r.trajectory)
     assert k == np.count_nonzero(full_run.trajectory[:, 0] <= 40.0)
@@ -66,22 +73,22 @@ def test_a_cut_run_is_the_full_run_up_to_that_time(car_park, full_run):
 
 
 def test_summary_numbers_are_the_metrics_modules(car_park, full_run):
-    s = ws.slam_summary(car_park)
-    m = map_metrics.map_errors(full_run.landmarks, car_park.beacons, max_distance=1.0)
-    e = metrics.trajectory_errors(full_run.odometry_trajectory, car_park.gps)
+    s = ch05.slam_summary(car_park)
+    m = map_eval.map_errors(full_run.landmarks, car_park.beacons, max_distance=1.0)
+    e = trajectory.trajectory_errors(full_run.odometry_trajectory, car_park.gps)
     assert (s["landmarks"], s["matched"], s["missed"], s["spurious"], s["duplicates"]) == \
         (15, 15, 0, 0, 0)
     assert s["map_rmse"] == m.rmse and s["map_rmse_aligned"] == m.rmse_aligned
     assert s["traj_rmse"] == e.rmse
     k = full_run.nis["kind"] == 0
     assert s["nis_per_dof"] == pytest.approx(full_run.nis["nis"][k].sum() / full_run.nis["dof"][k].sum())
-    assert "15 beacons matched" in ws._line(s)
+    assert "15 beacons matched" in ch05._line(s)
 
 
 def test_explorer_follows_its_sliders(car_park, full_run):
     """Every slider reaches the filter's configuration, and the summary, the text and the
     image follow (the summary equals the pure function's with the same configuration)."""
-    w = ws.slam_explorer(car_park, t_end=40.0)
+    w = ch05.slam_explorer(car_park, t_end=40.0)
     t_slider, speed, steer, rng, bearing, gate = w.children[:6]
     # every slider re-runs the filter (0.2 s): it fires on release only
     assert all(not s.continuous_update for s in w.children[:6])
@@ -97,8 +104,8 @@ def test_explorer_follows_its_sliders(car_park, full_run):
     # The picture is rendered on a Figure outside pyplot (an Image widget): nothing is left
     # open for a kernel thread's flush_figures to show half drawn.
     assert plt.get_fignums() == []
-    base = ws.fixed_initial_pose(car_park, SlamConfig.for_dataset("car_park"))
-    ref = ws.slam_summary(car_park, base.replace(sigma_range=0.05), t_end=40.0)
+    base = ch05.fixed_initial_pose(car_park, SlamConfig.for_dataset("car_park"))
+    ref = ch05.slam_summary(car_park, base.replace(sigma_range=0.05), t_end=40.0)
     assert w.holder["summary"]["nis_per_dof"] == ref["nis_per_dof"] != first["nis_per_dof"]
     rng.value = 0.1
     # the time slider to the end: the whole run, drawn anew

@@ -13,16 +13,21 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from annslam_lib import ann, ekf_slam, map_metrics  # noqa: E402
-from annslam_lib.ekf_slam import SlamConfig  # noqa: E402
-from annslam_lib.widgets import verdict as wv  # noqa: E402
+from annslam_lib import ann  # noqa: E402
+from annslam_lib.slam.config import SlamConfig  # noqa: E402
+from annslam_lib.chapters import ch08_verdict as ch08
+from annslam_lib.evaluation import map as map_eval
+from annslam_lib.paper import study
+from annslam_lib.plots import paper as paper_plots
+from annslam_lib.slam import runner
+  # noqa: E402
 
 SCALES = (0.3, 1.0, 3.0)
 
 
 @pytest.fixture(scope="module")
 def sweep(car_park):
-    return wv.r_scale_sweep(car_park, SCALES, t_heldout=100.0)
+    return study.r_scale_sweep(car_park, SCALES, t_heldout=100.0)
 
 
 @pytest.fixture(autouse=True)
@@ -34,12 +39,12 @@ def _close():
 def test_summary_is_an_independent_run_with_the_scaled_noise(car_park, sweep):
     s = sweep[0.3]
     cfg = SlamConfig.for_dataset("car_park")
-    r = ekf_slam.run(car_park, cfg.replace(sigma_range=cfg.sigma_range * math.sqrt(0.3),
+    r = runner.run(car_park, cfg.replace(sigma_range=cfg.sigma_range * math.sqrt(0.3),
                                            sigma_bearing=cfg.sigma_bearing * math.sqrt(0.3)))
     P = np.asarray(r.pose_cov)
     assert s["pose_trace"] == pytest.approx(np.mean(P[:, 0, 0] + P[:, 1, 1]), rel=1e-12)
     np.testing.assert_allclose(s["trace"], P[:, 0, 0] + P[:, 1, 1], rtol=1e-12)
-    m = map_metrics.map_errors(r.landmarks, car_park.beacons, max_distance=1.0)
+    m = map_eval.map_errors(r.landmarks, car_park.beacons, max_distance=1.0)
     assert s["map_rmse"] == pytest.approx(m.rmse, rel=1e-12)
     assert s["map_rmse_aligned"] == pytest.approx(m.rmse_aligned, rel=1e-12)
     assert s["sigma_range"] == pytest.approx(0.1 * math.sqrt(0.3), rel=1e-12)
@@ -69,7 +74,7 @@ def test_slider_moves_the_summary_and_the_picture(sweep):
     ref = {"label": "ANN", "t": sweep[0.3]["t"], "trace": 0.9 * sweep[0.3]["trace"],
            "pose_trace": 0.9 * sweep[0.3]["pose_trace"], "map_rmse": 0.08,
            "map_rmse_aligned": 0.04, "traj_rmse": 0.15}
-    w = wv.r_scale_explorer(sweep=sweep, reference=ref, scale=1.0)
+    w = ch08.r_scale_explorer(sweep=sweep, reference=ref, scale=1.0)
     slider = w.children[0]
     assert slider.continuous_update is False
     assert w.holder["summary"] is sweep[1.0]
@@ -90,7 +95,7 @@ def test_slider_moves_the_summary_and_the_picture(sweep):
 def test_plot_shows_the_sweep(sweep):
     ref = {"label": "ANN", "t": sweep[1.0]["t"], "trace": sweep[1.0]["trace"],
            "pose_trace": 0.014, "map_rmse": 0.08, "map_rmse_aligned": 0.04}
-    fig = wv.plot_r_scale(sweep, 0.3, ref)
+    fig = paper_plots.plot_r_scale(sweep, 0.3, ref)
     a0, a1, a2 = fig.axes
     lines = {ln.get_gid(): ln for ax in fig.axes for ln in ax.lines}
     np.testing.assert_array_equal(lines["mean_trace"].get_xdata(), SCALES)
@@ -104,13 +109,13 @@ def test_plot_shows_the_sweep(sweep):
 
 def test_equivalent_scale(sweep):
     for k in SCALES:
-        assert wv.equivalent_scale(sweep, sweep[k]["pose_trace"]) == pytest.approx(k, rel=1e-9)
+        assert study.equivalent_scale(sweep, sweep[k]["pose_trace"]) == pytest.approx(k, rel=1e-9)
     mid = math.sqrt(sweep[0.3]["pose_trace"] * sweep[1.0]["pose_trace"])
-    assert wv.equivalent_scale(sweep, mid) == pytest.approx(math.sqrt(0.3), rel=1e-9)
-    assert math.isnan(wv.equivalent_scale(sweep, 0.5 * sweep[0.3]["pose_trace"]))
+    assert study.equivalent_scale(sweep, mid) == pytest.approx(math.sqrt(0.3), rel=1e-9)
+    assert math.isnan(study.equivalent_scale(sweep, 0.5 * sweep[0.3]["pose_trace"]))
     bad = {1.0: {"pose_trace": 0.02}, 2.0: {"pose_trace": 0.01}}
     with pytest.raises(ValueError, match="does not increase"):
-        wv.equivalent_scale(bad, 0.015)
+        study.equivalent_scale(bad, 0.015)
 
 
 def test_reference_from_study(sweep):
@@ -119,27 +124,30 @@ def test_reference_from_study(sweep):
                          runs={"ann": [{"pose_trace": 0.02, "map_rmse": 0.07,
                                         "map_rmse_aligned": 0.04, "traj_rmse": 0.15}]},
                          models={"ann": [ann.InverseModel(0.05, 0.01)]})
-    ref = wv.reference_from_study(st, 0)
+    ref = study.reference_from_study(st, 0)
     assert ref["label"] == "ANN-enhanced (seed 4)" and ref["sigma_range"] == 0.05
     np.testing.assert_allclose(ref["trace"], sweep[1.0]["trace"], rtol=1e-12)
     assert ref["map_rmse"] == 0.07
 
 
 def test_bad_input(car_park, sweep):
-    for k in (0.0, -1.0, math.nan, math.inf, True, "1"):
+    for k in (0.0, -1.0, math.nan, math.inf):
         with pytest.raises(ValueError, match="R scale"):
-            wv.r_scale_summary(car_park, k)
-    with pytest.raises(ValueError, match="records.Dataset"):
-        wv.r_scale_summary("car_park", 1.0)
+            study.r_scale_summary(car_park, k)
+    for k in (True, "1"):
+        with pytest.raises(TypeError, match="R scale"):
+            study.r_scale_summary(car_park, k)
+    with pytest.raises(TypeError, match="records.Dataset"):
+        study.r_scale_summary("car_park", 1.0)
     with pytest.raises(ValueError, match="no surveyed beacons"):
-        wv.r_scale_summary(dataclasses.replace(car_park, beacons=None), 1.0)
-    with pytest.raises(ValueError, match="SlamConfig"):
-        wv.r_scale_summary(car_park, 1.0, config={"sigma_range": 0.1})
+        study.r_scale_summary(dataclasses.replace(car_park, beacons=None), 1.0)
+    with pytest.raises(TypeError, match="SlamConfig"):
+        study.r_scale_summary(car_park, 1.0, config={"sigma_range": 0.1})
     with pytest.raises(ValueError, match="distinct"):
-        wv.r_scale_sweep(car_park, (1.0, 1.0))
+        study.r_scale_sweep(car_park, (1.0, 1.0))
     with pytest.raises(ValueError, match="not in the sweep"):
-        wv.r_scale_explorer(sweep=sweep, scale=0.5)
+        ch08.r_scale_explorer(sweep=sweep, scale=0.5)
     with pytest.raises(ValueError, match="not in the sweep"):
-        wv.plot_r_scale(sweep, 0.5)
+        paper_plots.plot_r_scale(sweep, 0.5)
     with pytest.raises(ValueError, match="dataset or a precomputed sweep"):
-        wv.r_scale_explorer()
+        ch08.r_scale_explorer()

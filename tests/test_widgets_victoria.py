@@ -9,11 +9,18 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 
-from annslam_lib import ekf_slam, metrics, simulate  # noqa: E402
-from annslam_lib.ekf_slam import STATUS  # noqa: E402
-from annslam_lib.records import Gps  # noqa: E402
-from annslam_lib.uncertainty import ellipse_points  # noqa: E402
-from annslam_lib.widgets import victoria as wv  # noqa: E402
+  # noqa: E402
+from annslam_lib.slam.results import STATUS  # noqa: E402
+from annslam_lib.data.records import Gps  # noqa: E402
+from annslam_lib.models.uncertainty import ellipse_points  # noqa: E402
+from annslam_lib.chapters import ch06_victoria_park as ch06
+from annslam_lib.data import simulate
+from annslam_lib.evaluation import trajectory
+from annslam_lib.models import geometry
+from annslam_lib.models import uncertainty
+from annslam_lib.slam import config as slam_config
+from annslam_lib.slam import runner
+  # noqa: E402
 
 
 @pytest.fixture(autouse=True)
@@ -25,7 +32,7 @@ def _close_figures():
 @pytest.fixture(scope="module")
 def sim_run():
     ds = simulate.simulate(seed=0, laps=1)
-    r = ekf_slam.run(ds, ekf_slam.SlamConfig.for_dataset("simulated"), progress=False)
+    r = runner.run(ds, slam_config.SlamConfig.for_dataset("simulated"), progress=False)
     # A GPS with a 10 s gap (fixes between 20 and 30 s removed): what Victoria Park has.
     keep = (ds.gps.t < 20.0) | (ds.gps.t > 30.0)
     gps = Gps(t=ds.gps.t[keep], east=ds.gps.east[keep], north=ds.gps.north[keep])
@@ -41,24 +48,24 @@ def test_gps_outliers_flag_impossible_steps_only():
     y[20] = 100.0
     y[40:60] = 6.0
     gps = Gps(t=t, east=x, north=y)
-    flag = wv.gps_outliers(gps)
+    flag = trajectory.gps_outliers(gps)
     assert np.flatnonzero(flag).tolist() == [20, 40]          # not 21 (the way back), not 60
-    assert np.flatnonzero(wv.gps_outliers(gps, tolerance=7.0)).tolist() == [20]
+    assert np.flatnonzero(trajectory.gps_outliers(gps, tolerance=7.0)).tolist() == [20]
     # Jitter: a fix 2.5 m off its neighbours 0.2 s apart is within the 3 m tolerance.
     y2 = np.zeros_like(t)
     y2[30] = 2.5
-    assert not wv.gps_outliers(Gps(t=t, east=x, north=y2)).any()
-    assert wv.gps_outliers(Gps(t=t, east=x, north=y2), tolerance=0.2)[30]   # 2.53 m > 2 + 0.2 m
-    assert not wv.gps_outliers(Gps(t=[0.0], east=[0.0], north=[0.0])).any()
+    assert not trajectory.gps_outliers(Gps(t=t, east=x, north=y2)).any()
+    assert trajectory.gps_outliers(Gps(t=t, east=x, north=y2), tolerance=0.2)[30]   # 2.53 m > 2 + 0.2 m
+    assert not trajectory.gps_outliers(Gps(t=[0.0], east=[0.0], north=[0.0])).any()
     with pytest.raises(ValueError, match="max_speed"):
-        wv.gps_outliers(gps, max_speed=-1.0)
+        trajectory.gps_outliers(gps, max_speed=-1.0)
     with pytest.raises(ValueError, match="tolerance"):
-        wv.gps_outliers(gps, tolerance=float("nan"))
+        trajectory.gps_outliers(gps, tolerance=float("nan"))
 
 
 def test_first_seen_is_the_creating_observation(sim_run):
     _, r, _ = sim_run
-    first = wv.landmark_first_seen(r)
+    first = ch06.landmark_first_seen(r)
     log = r.observations
     assert first.shape == (r.landmarks.shape[0],) and r.landmarks.shape[0] >= 10
     for j in range(r.landmarks.shape[0]):
@@ -69,11 +76,11 @@ def test_first_seen_is_the_creating_observation(sim_run):
 
 def test_snapshot_reads_the_stored_run(sim_run):
     _, r, gps = sim_run
-    errors = metrics.trajectory_errors(r.odometry_trajectory, gps)
-    first = wv.landmark_first_seen(r)
+    errors = trajectory.trajectory_errors(r.odometry_trajectory, gps)
+    first = ch06.landmark_first_seen(r)
     k = 150
     t = float(r.trajectory[k, 0]) + 0.05                        # between two scans
-    s = wv.run_snapshot(r, gps, t)
+    s = ch06.run_snapshot(r, gps, t)
     assert s["row"] == k and s["scan"] == r.scan_index[k]
     np.testing.assert_array_equal(s["pose"], r.trajectory[k, 1:4])
     assert s["sigma_xy"] == pytest.approx(np.sqrt(np.linalg.eigvalsh(r.pose_cov[k][:2, :2]).max()))
@@ -82,19 +89,19 @@ def test_snapshot_reads_the_stored_run(sim_run):
     i = np.argmin(np.abs(errors.t - t))
     assert s["fix"]["t"] == errors.t[i] and s["fix"]["error"] == pytest.approx(errors.error[i])
     # The error is the distance from the filtered track to that fix, recomputed here.
-    p = metrics.interpolate_poses(r.odometry_trajectory, s["fix"]["t"])
+    p = geometry.interpolate_poses(r.odometry_trajectory, s["fix"]["t"])
     assert s["fix"]["error"] == pytest.approx(np.hypot(*(p[:2] - s["fix"]["xy"])), abs=1e-12)
-    end = wv.run_snapshot(r, gps, float(r.trajectory[-1, 0]))
+    end = ch06.run_snapshot(r, gps, float(r.trajectory[-1, 0]))
     assert end["landmarks"] == r.landmarks.shape[0] and end["row"] == r.trajectory.shape[0] - 1
 
 
 def test_snapshot_in_a_gps_gap_has_no_fix(sim_run):
     _, r, gps = sim_run
-    s = wv.run_snapshot(r, gps, 25.0)
+    s = ch06.run_snapshot(r, gps, 25.0)
     last = gps.t[gps.t <= 25.0][-1]
     assert s["fix"] is None and last < 20.0
     assert s["since_fix"] == pytest.approx(25.0 - last)
-    assert wv.run_snapshot(r, gps, 25.0, fix_window=6.0)["fix"] is not None
+    assert ch06.run_snapshot(r, gps, 25.0, fix_window=6.0)["fix"] is not None
 
 
 def test_ellipse_curves_equal_ellipse_points():
@@ -103,16 +110,16 @@ def test_ellipse_curves_equal_ellipse_points():
     covs = A @ np.swapaxes(A, 1, 2) + np.array([0.0, 1e-12])[:, None] * np.eye(2)
     covs[0] = np.diag([1.0, 0.0])                                  # singular: a segment
     means = rng.normal(size=(5, 2)) * 10
-    curves = wv.ellipse_curves(means, covs, 2.0, 50)
+    curves = uncertainty.ellipse_curves(means, covs, 2.0, 50)
     for m, c, e in zip(means, covs, curves):
         np.testing.assert_allclose(e, ellipse_points(m, c, 2.0, 50), atol=1e-12)
 
 
 def test_draw_run_shows_the_landmarks_seen_so_far(sim_run):
     _, r, gps = sim_run
-    first = wv.landmark_first_seen(r)
+    first = ch06.landmark_first_seen(r)
     t = float(np.sort(first)[5]) + 1e-9                           # six landmarks seen
-    ax = wv.draw_run(r, gps, t)
+    ax = ch06.draw_run(r, gps, t)
     ells = [c for c in ax.collections if isinstance(c, LineCollection)]
     assert len(ells) == 1 and len(ells[0].get_segments()) == np.count_nonzero(first <= t) == 6
     plus = [ln for ln in ax.lines if ln.get_marker() == "+"][0]
@@ -123,10 +130,10 @@ def test_draw_run_shows_the_landmarks_seen_so_far(sim_run):
 
 def test_draw_gps_errors_marks_outliers_and_keeps_gaps(sim_run):
     _, r, gps = sim_run
-    errors = metrics.trajectory_errors(r.odometry_trajectory, gps)
+    errors = trajectory.trajectory_errors(r.odometry_trajectory, gps)
     outliers = np.zeros(errors.t.size, bool)
     outliers[3] = True
-    ax = wv.draw_gps_errors(errors, t=10.0, outliers=outliers)
+    ax = ch06.draw_gps_errors(errors, t=10.0, outliers=outliers)
     dots, crosses = ax.lines[0], ax.lines[1]
     assert dots.get_linestyle() == "None" and len(dots.get_xdata()) == errors.t.size - 1
     assert crosses.get_xdata()[0] == errors.t[3]
@@ -136,7 +143,7 @@ def test_scrubber_follows_the_slider(sim_run):
     _, r, gps = sim_run
     outliers = np.zeros(gps.t.size, bool)
     outliers[10] = True
-    w = wv.run_scrubber(r, gps, start=12, step=1, outliers=outliers)
+    w = ch06.run_scrubber(r, gps, start=12, step=1, outliers=outliers)
     assert w.holder["summary"]["t"] == 12.0
     assert w.children[0].min == int(np.ceil(r.trajectory[0, 0]))
     assert w.children[0].max == int(np.floor(r.trajectory[-1, 0]))
@@ -152,24 +159,24 @@ def test_scrubber_follows_the_slider(sim_run):
     row = np.searchsorted(r.trajectory[:, 0], 25.0, side="right") - 1
     np.testing.assert_array_equal(s["pose"], r.trajectory[row, 1:4])
     assert s["landmarks"] >= first["landmarks"] and s["row"] > first["row"]
-    assert s["landmarks"] == wv.run_snapshot(r, gps, 25.0)["landmarks"]
+    assert s["landmarks"] == ch06.run_snapshot(r, gps, 25.0)["landmarks"]
 
 
 def test_bad_input_is_a_clear_error(sim_run):
     _, r, gps = sim_run
     with pytest.raises(ValueError, match="outside the run"):
-        wv.run_snapshot(r, gps, float(r.trajectory[-1, 0]) + 1.0)
+        ch06.run_snapshot(r, gps, float(r.trajectory[-1, 0]) + 1.0)
     with pytest.raises(ValueError, match="finite"):
-        wv.run_snapshot(r, gps, float("nan"))
-    with pytest.raises(ValueError, match="SlamResult"):
-        wv.run_snapshot("run", gps, 10.0)
-    with pytest.raises(ValueError, match="records.Gps"):
-        wv.run_scrubber(r, gps.xy)
+        ch06.run_snapshot(r, gps, float("nan"))
+    with pytest.raises(TypeError, match="SlamResult"):
+        ch06.run_snapshot("run", gps, 10.0)
+    with pytest.raises(TypeError, match="records.Gps"):
+        ch06.run_scrubber(r, gps.xy)
     with pytest.raises(ValueError, match="step"):
-        wv.run_scrubber(r, gps, step=0)
+        ch06.run_scrubber(r, gps, step=0)
     with pytest.raises(ValueError, match="start"):
-        wv.run_scrubber(r, gps, start=-5)
+        ch06.run_scrubber(r, gps, start=-5)
     with pytest.raises(ValueError, match="outliers"):
-        wv.run_scrubber(r, gps, outliers=np.zeros(3, bool))
+        ch06.run_scrubber(r, gps, outliers=np.zeros(3, bool))
     with pytest.raises(ValueError, match="3 means but 2"):
-        wv.ellipse_curves(np.zeros((3, 2)), np.zeros((2, 2, 2)))
+        uncertainty.ellipse_curves(np.zeros((3, 2)), np.zeros((2, 2, 2)))

@@ -1,7 +1,10 @@
-"""The course as instructors run it: grading that a submission cannot game.
+"""Course layer: what instructors and students run around the notebooks.
 
+- ``release``: the student versions (nbgrader's format), their checks for leaks
+- ``workspace``: a student's own copy of the course, never overwritten
 - ``grader``: scores from the instructor's notebook, decided outside the student's code
 - ``sandbox``: the kernel that runs student code (bubblewrap, limits, time-outs, deadline)
 - ``codec``: data, never code, between the grader and that kernel
 - ``kernel_side``: the grader's small helper inside the kernel
+- ``cli``: ``python -m annslam_lib ...``
 """

@@ -26,7 +26,7 @@ An error or a time-out in a solution cell scores 0 for the exercises whose test 
 the names it defines, with the reason; a kernel that dies is restarted and the notebook's
 good cells replayed, so one broken exercise does not take the others with it. A check may
 declare library functions a solution must not call (``grading.core.forbids``); a solution
-that calls one scores 0 ("my_observe calls annslam_lib.observation.observe: write it
+that calls one scores 0 ("my_observe calls annslam_lib.models.observation.observe: write it
 yourself"), found both in its source and by a call monitor in the kernel. What the monitor
 cannot stop: a student who copies the library's code into the answer, or hides a call from
 both the source reading and the monitor; the README says so.
@@ -278,7 +278,7 @@ def _read_notebook(path: Path, what: str):
         raise ValueError(f"the {what} is not a valid notebook (not nbformat JSON: {first})"
                          ) from None
     if not isinstance(nb.get("cells"), list):
-        raise ValueError(f"the {what} has no list of cells")
+        raise TypeError(f"the {what} has no list of cells")
     return nb
 
 
@@ -361,7 +361,7 @@ def plan(instructor, submission) -> GradePlan:
 
 def _visible(source: str) -> str:
     """A test cell as the student version shows it (hidden tests removed)."""
-    from ..release import _regions, _replace
+    from .release import _regions, _replace
 
     return _replace(source, _regions(source, "BEGIN HIDDEN TESTS", "END HIDDEN TESTS", "cell"),
                     None)
@@ -370,7 +370,7 @@ def _visible(source: str) -> str:
 def _stub_of(source: str) -> str:
     """The instructor's solution cell with its solution replaced by the stub (what an
     untouched student version holds)."""
-    from ..release import _regions, _replace
+    from .release import _regions, _replace
 
     return _replace(source, _regions(source, "BEGIN SOLUTION", "END SOLUTION", "cell"),
                     CODE_STUB)
@@ -463,7 +463,7 @@ def _read_reply(res: ExecResult, name: str) -> dict:
             raise ValueError("not a string")
         reply = json.loads(ast.literal_eval(text))
         if not isinstance(reply, (dict, list)):
-            raise ValueError("not an object")
+            raise TypeError("not an object")
         return reply
     except (KeyError, ValueError, SyntaxError, TypeError, RecursionError, MemoryError) as e:
         raise GradingError(f"{name}: the grader could not read what came back from your "
@@ -773,7 +773,7 @@ def grade_batch(paths, *, instructor_dir=None, json_path=None, limits: Limits = 
     subs = _submissions(paths)
     hide = {inst_dir} | {p.resolve().parent for p in subs}
     guard = [ROOT / "annslam_lib", inst_dir]
-    from .. import fetch
+    from ..data import fetch
     if fetch.data_dir().exists():
         guard.append(fetch.data_dir())
     results = []

@@ -196,7 +196,7 @@ class Sandbox:
             return []
         args = [bwrap_available(), "--ro-bind", "/", "/", "--dev", "/dev", "--proc", "/proc",
                 "--tmpfs", "/tmp", "--tmpfs", "/dev/shm"]
-        from .. import fetch
+        from ..data import fetch
 
         data = fetch.data_dir().resolve()
         keep = [Path(sys.prefix).resolve(), LIB.parent, data]
@@ -223,7 +223,7 @@ class Sandbox:
     def _env(self) -> dict:
         keep = ("PATH", "LANG", "LC_ALL", "ANNSLAM_DATA", "ANNSLAM_DATA_URL", "TZ")
         env = {k: os.environ[k] for k in keep if k in os.environ}
-        from .. import fetch                    # the kernel reads the data where we do
+        from ..data import fetch                  # the kernel reads the data where we do
         env.update(ANNSLAM_DATA=str(fetch.data_dir()), HOME=str(self.home),
                    PYTHONPATH=str(self.root / "lib"), MPLCONFIGDIR=str(self.home / ".mpl"),
                    IPYTHONDIR=str(self.home / ".ipython"), JUPYTER_RUNTIME_DIR=str(self.ipc),

@@ -15,13 +15,16 @@
 """
 from __future__ import annotations
 
-import contextlib
 import math
 from typing import Callable
 
 import numpy as np
 
 from .. import ann, paper
+from ..ann.network import forward as reference_forward
+from ..ann.network import mapminmax, mapminmax_reverse
+from ..ann.network import one_torch_thread as _one_thread
+from ..ann.network import train_loop as reference_train_loop
 from .core import forbids, Passed, GradingError, Mistake, call, check_function, fmt
 
 __all__ = ["reference_forward", "check_forward", "mapminmax", "mapminmax_reverse",
@@ -40,46 +43,6 @@ def _copying(fn: Callable) -> Callable:
 
 
 # ----------------------------------------------------------------------------- forward pass
-
-def reference_forward(X, W1, b1, W2, b2, x_mean, x_std, y_mean, y_std) -> np.ndarray:
-    """The landmark network's output (n, 2), the correction in metres (notebook 07,
-    section 1): x~ = (x - x_mean) / x_std, y~ = W2 tanh(W1 x~ + b1) + b2, y = y~ y_std +
-    y_mean. X (n, 12) with the columns of ``ann.FEATURE_NAMES``; W1 (h, 12), b1 (h,),
-    W2 (2, h), b2 (2,). Computed by ``ann.TrainedModel.correction`` with these weights
-    (its flat parameter vector is W1, b1, W2, b2 in that order, row-major)."""
-    W1, W2 = np.asarray(W1, dtype=float), np.asarray(W2, dtype=float)
-    b1, b2 = np.asarray(b1, dtype=float).ravel(), np.asarray(b2, dtype=float).ravel()
-    h = W1.shape[0]
-    if W1.shape != (h, len(ann.FEATURE_NAMES)) or b1.shape != (h,) or W2.shape != (2, h) \
-            or b2.shape != (2,):
-        raise ValueError(f"weights must be W1 (h, {len(ann.FEATURE_NAMES)}), b1 (h,), W2 (2, h), "
-                         f"b2 (2,); got {W1.shape}, {b1.shape}, {W2.shape}, {b2.shape}")
-    import torch
-
-    theta = np.concatenate([W1.ravel(), b1, W2.ravel(), b2])
-    model = ann.TrainedModel(config=ann.TrainConfig(hidden=(h,)), theta=theta, x_mean=x_mean,
-                             x_std=x_std, y_mean=y_mean, y_std=y_std)
-    # model.correction(X), minus its switch to deterministic kernels: the first switch imports
-    # half of torch (seconds), and a forward pass on the CPU is deterministic anyway
-    # (tests/test_grading_ann.py compares the two)
-    X = np.asarray(X, dtype=float)
-    xn = (X[:, model._cols] - model.x_mean) / model.x_std
-    with _one_thread(), torch.no_grad():
-        out = ann._forward(model.theta, torch.from_numpy(xn), model._shapes).numpy()
-    return out * model.y_std + model.y_mean
-
-
-@contextlib.contextmanager
-def _one_thread():
-    """One torch thread while inside (restored after), so that runs repeat to the bit."""
-    import torch
-
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(threads)
 
 
 def _forward_cases(seed: int, n: int) -> list[dict]:
@@ -211,37 +174,6 @@ def check_forward(fn: Callable, *, seed: int = 0, n: int = 6, quiet: bool = Fals
 
 
 # ----------------------------------------------------------------------------- mapminmax
-
-def _minmax_args(x, xmin, xmax):
-    x = np.asarray(x, dtype=float)
-    xmin, xmax = np.asarray(xmin, dtype=float), np.asarray(xmax, dtype=float)
-    if x.ndim != 2 or xmin.shape != (x.shape[1],) or xmax.shape != (x.shape[1],):
-        raise ValueError(f"x must be (n, F) and xmin, xmax (F,); got {x.shape}, {xmin.shape}, "
-                         f"{xmax.shape}")
-    if not (np.all(np.isfinite(xmin)) and np.all(np.isfinite(xmax))) or np.any(xmax < xmin):
-        raise ValueError("xmin and xmax must be finite with xmin <= xmax")
-    return x, xmin, xmax
-
-
-def mapminmax(x, xmin, xmax) -> np.ndarray:
-    """nntool's default input/output processing ``mapminmax('apply', x, PS)`` (notebook 07,
-    exercise 7.3): each column j of x (n, F) mapped linearly so that xmin[j] -> -1 and
-    xmax[j] -> +1, y = 2 (x - xmin) / (xmax - xmin) - 1, with the bounds of the TRAINING
-    part (later inputs may fall outside [-1, 1]; nothing is clipped). A constant column
-    (xmax = xmin) passes through unchanged, as MATLAB documents (y = x)."""
-    x, xmin, xmax = _minmax_args(x, xmin, xmax)
-    span = xmax - xmin
-    const = span == 0
-    y = 2.0 * (x - xmin) / np.where(const, 1.0, span) - 1.0
-    return np.where(const, x, y)
-
-
-def mapminmax_reverse(y, xmin, xmax) -> np.ndarray:
-    """The inverse of :func:`mapminmax` (``mapminmax('reverse', y, PS)``):
-    x = (y + 1) (xmax - xmin) / 2 + xmin; constant columns unchanged."""
-    y, xmin, xmax = _minmax_args(y, xmin, xmax)
-    span = xmax - xmin
-    return np.where(span == 0, y, (y + 1.0) * span / 2.0 + xmin)
 
 
 def _minmax_cases(seed: int, n: int) -> list[tuple]:
@@ -397,21 +329,6 @@ _LOOP_CASES = (
     ("SGD with momentum 0.9, lr 0.02", lambda torch, p: torch.optim.SGD(p, lr=0.02, momentum=0.9), 30),
     ("Adam, lr 0.02", lambda torch, p: torch.optim.Adam(p, lr=0.02), 30),
 )
-
-
-def reference_train_loop(net, X, Y, optimizer, epochs: int) -> list[float]:
-    """The training loop (notebook 07, exercise 7.2; ``ann.train`` with ``algorithm='adam'``
-    runs the same loop on its flat parameter vector): per epoch zero the gradients, forward
-    pass, mean squared error over all outputs (nntool's ``mse``), back-propagate, step.
-    Returns the loss of every epoch, computed before its step."""
-    losses = []
-    for _ in range(epochs):
-        optimizer.zero_grad()
-        loss = ((net(X) - Y) ** 2).mean()
-        loss.backward()
-        optimizer.step()
-        losses.append(loss.item())
-    return losses
 
 
 def _loop(kind: str):

@@ -5,7 +5,7 @@ bearing difference wrapped, S = H P H^T + R, and a ValueError for an S that is n
 definite. ``check_in_gate``: the chi-square gate decision. ``check_associate``: greedy
 nearest-neighbour association with mutual exclusion on a d2 matrix, graded on crafted
 scenes whose failure messages say which measurement went to which landmark and why that
-is wrong. References: :mod:`annslam_lib.association`.
+is wrong. References: :mod:`annslam_lib.perception.association`.
 """
 from __future__ import annotations
 
@@ -15,8 +15,8 @@ import math
 import numpy as np
 from scipy.stats import chi2
 
-from ..association import GATE, NEW, NEW_LANDMARK, REJECTED, associate, gate_threshold, mahalanobis
-from ..observation import observe
+from ..perception.association import GATE, NEW, NEW_LANDMARK, REJECTED, associate, gate_threshold, mahalanobis
+from ..models.observation import observe
 from .core import (forbids, Mistake, Passed, call, check_function, check_raises, describe, fail, fmt,
                    prefetch)
 

@@ -1,10 +1,10 @@
 """Checks of notebook 05's graded exercises (EKF-SLAM): landmark augmentation (section 1)
 and the measurement update in Joseph form (section 3).
 
-The references are the plain functions of :mod:`annslam_lib.ekf_dense`
-(:func:`~annslam_lib.ekf_dense.augment_landmark`,
-:func:`~annslam_lib.ekf_dense.joseph_covariance`,
-:func:`~annslam_lib.ekf_dense.range_bearing_update`), tested there against the dense filter.
+The references are the plain functions of :mod:`annslam_lib.slam.dense`
+(:func:`~annslam_lib.slam.dense.augment_landmark`,
+:func:`~annslam_lib.slam.dense.joseph_covariance`,
+:func:`~annslam_lib.slam.dense.range_bearing_update`), tested there against the dense filter.
 The cases are SLAM states of realistic size (3 + 2N with N up to 10 landmarks, covariances
 with strong correlations), plus the edge cases that catch real mistakes: a heading near
 +-pi, a landmark straight to the left of the laser where the bearing wraps, arbitrary
@@ -21,9 +21,9 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .. import ekf_dense
-from ..geometry import wrap_angle
-from ..observation import inverse_observe, observe
+from ..slam import dense as ekf_dense
+from ..models.geometry import wrap_angle
+from ..models.observation import inverse_observe, observe
 from .core import (forbids, NOT_WRITTEN, GradingError, Mistake, Passed, call, check_function, check_raises,
                    fmt, labelled)
 
@@ -263,7 +263,7 @@ def _block_note(fn, reference, table, *, name) -> str:
 @forbids(ekf_dense.augment_landmark)
 def check_augment(fn: Callable, *, seed: int = 0, n: int = 6) -> str:
     """Exercise 5.1 (notebook 05 section 1, landmark augmentation): ``fn(x, P, z, R)`` must
-    return (x_new, P_new) as :func:`annslam_lib.ekf_dense.augment_landmark` for one new
+    return (x_new, P_new) as :func:`annslam_lib.slam.dense.augment_landmark` for one new
     landmark, on SLAM states with 0 to 10 landmarks (6 fixed cases plus ``n`` seeded ones).
     Catches: a landmark placed with the wrong bearing convention (90° off, mirrored as in
     the paper's printed bearing, heading left out), missing cross covariances with the old
@@ -403,7 +403,7 @@ _JOSEPH_MISTAKES = [
 @forbids(ekf_dense.joseph_covariance, ekf_dense.joseph_update)
 def check_joseph_covariance(fn: Callable, *, seed: int = 0, n: int = 4) -> str:
     """Exercise 5.2 (notebook 05 section 3, the Joseph form): ``fn(P, H, R, K)`` must return
-    (I - K H) P (I - K H)^T + K R K^T (:func:`annslam_lib.ekf_dense.joseph_covariance`)
+    (I - K H) P (I - K H)^T + K R K^T (:func:`annslam_lib.slam.dense.joseph_covariance`)
     for ANY gain K: optimal, scaled, perturbed and random gains on SLAM states with 4 to 10
     landmarks (6 fixed cases plus ``n`` seeded ones). Catches the short forms (I - K H) P
     and P - K S K^T (right only for the optimal gain), a missing K R K^T, K S K^T for
@@ -525,7 +525,7 @@ def _singular_cases(seed: int) -> list[tuple[str, tuple]]:
 @forbids(ekf_dense.range_bearing_update, ekf_dense.joseph_update, ekf_dense.kalman_gain)
 def check_ekf_update(fn: Callable, *, seed: int = 0, n: int = 5) -> str:
     """Exercise 5.3 (notebook 05 section 3, the EKF update): ``fn(x, P, z, z_hat, H, R)`` must
-    return (x_new, P_new) as :func:`annslam_lib.ekf_dense.range_bearing_update`: the wrapped
+    return (x_new, P_new) as :func:`annslam_lib.slam.dense.range_bearing_update`: the wrapped
     innovation, the optimal gain, the heading wrapped into (-pi, pi], the Joseph form; on
     SLAM states with 3 to 10 landmarks and 1 to 3 observed at once (5 fixed cases plus ``n``
     seeded ones), and a ValueError for a singular innovation covariance (three cases, one

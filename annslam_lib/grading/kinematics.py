@@ -1,7 +1,7 @@
 """Checks for the graded exercises of chapter 01 (vehicle kinematics) and chapter 02 (laser
 offset transform).
 
-Each ``check_*`` compares a student's function with the library (:mod:`annslam_lib.kinematics`,
+Each ``check_*`` compares a student's function with the library (:mod:`annslam_lib.models.motion`,
 itself checked against SymPy and finite differences) on seeded random cars, poses and controls
 plus edge cases, and names the known mistakes: the paper's printed equations of sections 2.2
 and 4.1 (:mod:`annslam_lib.paper`, erratum ids in the messages) and the usual slips (no
@@ -25,9 +25,10 @@ from typing import Callable
 
 import numpy as np
 
-from .. import kinematics, paper
-from ..geometry import numerical_jacobian, wrap_angle
-from ..vehicle import ACFR_UTE, Vehicle
+from ..models import motion as kinematics
+from .. import paper
+from ..models.geometry import numerical_jacobian, wrap_angle
+from ..models.vehicle import ACFR_UTE, Vehicle
 from .core import (forbids, GradingError, Mistake, Passed, call, check_function, check_jacobian, describe,
                    fmt, passing_prefetch, prefetch)
 
@@ -192,7 +193,7 @@ def check_axle_speed(fn: Callable, *, seed: int = 0, n: int = 40,
     name = _name(fn, "my_axle_speed")
     mistakes = [Mistake(m.message.replace("my_axle_speed", name), m.wrong) for m in _SPEED_MISTAKES]
     return check_function(_copying(fn), _axle_speed_ref, cases, name=name, arg_names=_SPEED_ARGS,
-                          labels=None, mistakes=mistakes, what="kinematics.axle_speed", quiet=quiet)
+                          labels=None, mistakes=mistakes, what="motion.axle_speed", quiet=quiet)
 
 
 # ------------------------------------------------------------------ 01, exercise 1.2
@@ -247,7 +248,7 @@ _STEP_MISTAKES = (
             "its y row subtracts the lever-arm term instead of adding it. Derive the laser's "
             "velocity from P_l = P_c + R(phi) (a, b) (section 3 of this notebook).",
             _euler_with(paper.full_state_printed)),
-    Mistake("{name} computes the exact circular arc (like kinematics.predict_exact). That is "
+    Mistake("{name} computes the exact circular arc (like motion.predict_exact). That is "
             "the better integrator, but the filter's process model, and the F and G of the "
             "next exercise, are the EULER step: pose + dt * (laser velocity at the start).",
             lambda pose, u, dt, L, a, b: kinematics.predict_exact(pose, u, dt, _car(L, a, b))),
@@ -275,7 +276,7 @@ def check_euler_step(fn: Callable, *, seed: int = 0, n: int = 40,
                      quiet: bool = False) -> str:
     """Grade ``fn(pose, control, dt, L, a, b) -> pose_next`` (3,), one Euler step of the laser
     model with the heading wrapped to (-pi, pi] (notebook 01 section 4; the reference is
-    ``kinematics.predict``, paper 4.1 corrected).
+    ``motion.predict``, paper 4.1 corrected).
 
     ``pose`` = laser (x, y, phi), ``control`` = (v_c, alpha). Cases: ``n`` seeded random
     poses, controls (reversing included), steps up to 0.3 s and cars, plus headings that cross
@@ -290,7 +291,7 @@ def check_euler_step(fn: Callable, *, seed: int = 0, n: int = 40,
     student = _copying(fn)
     msg = check_function(student, _step_ref, cases, name=name, arg_names=_STEP_ARGS,
                          labels=_STEP_LABELS, angles=[2], mistakes=mistakes,
-                         what="kinematics.predict", quiet=True)
+                         what="motion.predict", quiet=True)
     _check_wrapped(student, cases, name, _STEP_ARGS, 2, "'phi_k'")
     if not quiet:
         print(msg)
@@ -361,7 +362,7 @@ def check_process_jacobians(fn: Callable, *, seed: int = 0, n: int = 30,
                             quiet: bool = False) -> str:
     """Grade ``fn(pose, control, dt, L, a, b) -> (F, G)``, the Jacobians of the Euler step of
     the laser model: F = d pose_k / d pose_(k-1) (3 x 3), G = d pose_k / d (v_c, alpha) (3 x 2)
-    (notebook 01 section 4; reference ``kinematics.predict``, finite-difference tested).
+    (notebook 01 section 4; reference ``motion.predict``, finite-difference tested).
 
     Same cases as :func:`check_euler_step`. A wrong entry is named ('d y_k / d phi (entry
     [1, 2])'), with sign errors, entries left at zero and transposes flagged. Known mistakes:
@@ -382,7 +383,7 @@ def check_process_jacobians(fn: Callable, *, seed: int = 0, n: int = 30,
         except GradingError as e:   # say which matrix, also in the generic messages
             msg = str(e)
             raise GradingError(msg if msg.startswith(name) else f"{which}: {msg}") from None
-    msg = f"✓ {name}: F and G agree with kinematics.predict on {len(cases)} inputs."
+    msg = f"✓ {name}: F and G agree with motion.predict on {len(cases)} inputs."
     if not quiet:
         print(msg)
     return Passed(msg)
@@ -418,7 +419,7 @@ _POSE_MISTAKES = (
             lambda p, a, b: _lever(p, a, b, lambda f, a, b: ((a + b) * np.cos(f) + np.pi / 2,
                                                             (a + b) * np.sin(f) + np.pi / 2))),
     Mistake("{name} subtracts the lever arm: that goes from the laser to the axle "
-            "(kinematics.axle_pose, the inverse). The laser is a m AHEAD of C and b m to its "
+            "(motion.axle_pose, the inverse). The laser is a m AHEAD of C and b m to its "
             "left: P_l = P_c + a T(phi) + b T(phi + pi/2).",
             lambda p, a, b: _lever(p, a, b, lambda f, a, b: (-a * np.cos(f) + b * np.sin(f),
                                                             -a * np.sin(f) - b * np.cos(f)))),
@@ -443,7 +444,7 @@ def check_laser_pose(fn: Callable, *, seed: int = 0, n: int = 40,
                      quiet: bool = False) -> str:
     """Grade ``fn(axle_pose, a, b) -> laser_pose`` (3,): the laser a m ahead and b m left of the
     rear-axle centre, heading unchanged (notebook 02 "The geometry"; paper 4.1 P_l, whose scalar
-    form is correct; reference ``kinematics.laser_pose``).
+    form is correct; reference ``motion.laser_pose``).
 
     Cases: ``n`` seeded random poses and offsets plus headings 0, pi/2, near +-pi, the laser on
     the right, a = b = 0 and a pure sideways offset. Known mistakes: the printed vector form read
@@ -455,7 +456,7 @@ def check_laser_pose(fn: Callable, *, seed: int = 0, n: int = 40,
     mistakes = [Mistake(m.message.replace("{name}", name), m.wrong) for m in _POSE_MISTAKES]
     return check_function(_copying(fn), _laser_ref, cases, name=name, arg_names=_POSE_ARGS,
                           labels=_POSE_LABELS, angles=[2], mistakes=mistakes,
-                          what="kinematics.laser_pose", quiet=quiet)
+                          what="motion.laser_pose", quiet=quiet)
 
 
 # ------------------------------------------------------------------ 02, exercise 2.2
@@ -513,7 +514,7 @@ def check_laser_velocity(fn: Callable, *, seed: int = 0, n: int = 40,
                          quiet: bool = False) -> str:
     """Grade ``fn(pose, control, L, a, b) -> (x_dot, y_dot, phi_dot)``, the velocity of the laser
     point (notebook 02 "How the laser moves"; paper 4.1 "full state" corrected; reference
-    ``kinematics.laser_velocity``).
+    ``motion.laser_velocity``).
 
     Cases as in :func:`check_euler_step` without dt. Known mistakes: the printed full state
     (both rows, or only its x row, erratum 4.1-full-x, or only its y row, 4.1-full-y), the rear
@@ -524,7 +525,7 @@ def check_laser_velocity(fn: Callable, *, seed: int = 0, n: int = 40,
     mistakes = [Mistake(m.message.replace("{name}", name), m.wrong) for m in _RATE_MISTAKES]
     return check_function(_copying(fn), _rate_ref, cases, name=name, arg_names=_RATE_ARGS,
                           labels=_RATE_LABELS, mistakes=mistakes,
-                          what="kinematics.laser_velocity", quiet=quiet)
+                          what="motion.laser_velocity", quiet=quiet)
 
 
 # ------------------------------------------------------------------ 02, exercise 2.3
@@ -545,7 +546,7 @@ def _with_column(pose, a, b, col):
 
 _JAC_MISTAKES = (
     Mistake("{name}: the heading column has the wrong sign in both rows; that is the Jacobian "
-            "of the inverse transform (kinematics.axle_pose, which subtracts the lever arm). "
+            "of the inverse transform (motion.axle_pose, which subtracts the lever arm). "
             "d x_l / d phi = d/dphi (a cos(phi) - b sin(phi)).",
             lambda p, a, b: _with_column(p, a, b, lambda f, a, b: (a * np.sin(f) + b * np.cos(f),
                                                                   -a * np.cos(f) + b * np.sin(f)))),
@@ -565,7 +566,7 @@ def check_laser_pose_jacobian(fn: Callable, *, seed: int = 0, n: int = 30,
                               quiet: bool = False) -> str:
     """Grade ``fn(axle_pose, a, b) -> J`` (3 x 3), the Jacobian of the laser pose with respect
     to the axle pose (x_c, y_c, phi) (notebook 02 "The Jacobian of the transform"; reference
-    ``kinematics.laser_pose``, checked against SymPy and finite differences).
+    ``motion.laser_pose``, checked against SymPy and finite differences).
 
     Cases as in :func:`check_laser_pose`. A wrong entry is named ('d y_l / d phi (entry
     [1, 2])') with sign errors and transposes flagged. Known mistakes: the inverse's Jacobian,
@@ -576,4 +577,4 @@ def check_laser_pose_jacobian(fn: Callable, *, seed: int = 0, n: int = 30,
     mistakes = [Mistake(m.message.replace("{name}", name), m.wrong) for m in _JAC_MISTAKES]
     return check_jacobian(_copying(fn), _jac_ref, cases, name=name, rows=_J_ROWS, cols=_J_COLS,
                           arg_names=_POSE_ARGS, mistakes=mistakes,
-                          what="the Jacobian of kinematics.laser_pose", quiet=quiet)
+                          what="the Jacobian of motion.laser_pose", quiet=quiet)

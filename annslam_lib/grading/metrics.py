@@ -1,6 +1,6 @@
 """Checks of notebook 06's graded exercises (Victoria Park): the track's error against GPS
-(section 3, :func:`annslam_lib.metrics.trajectory_errors`) and the GPS fixes no car could
-have reached (section 3, :func:`annslam_lib.widgets.victoria.gps_outliers`).
+(section 3, :func:`annslam_lib.evaluation.trajectory.trajectory_errors`) and the GPS fixes no car could
+have reached (section 3, :func:`annslam_lib.evaluation.trajectory.gps_outliers`).
 
 The cases are synthetic drives at the ACFR rates (odometry-rate track at 40 Hz, GPS at
 5 Hz on a clock offset from the odometry's) with what Victoria Park's GPS does: gaps of
@@ -18,9 +18,9 @@ from typing import Callable
 
 import numpy as np
 
-from ..metrics import trajectory_errors
-from ..records import Gps
-from ..widgets.victoria import gps_outliers
+from ..evaluation.trajectory import trajectory_errors
+from ..data.records import Gps
+from ..evaluation.trajectory import gps_outliers
 from .core import (forbids, GradingError, Mistake, Passed, call, check_function, check_raises, fmt,
                    labelled)
 
@@ -162,8 +162,8 @@ def _real_run(name: str):
     """(track, GPS) of a real run, for a check that names it ('victoria_park'): the run's
     dead-reckoned laser track from its GPS-fitted start, and its GPS record. Computed by
     the check itself, so a grader needs nothing from the student's notebook."""
-    from .. import datasets
-    from ..dead_reckoning import dead_reckon, initial_pose_from_gps
+    from ..data import loaders as datasets
+    from ..slam.dead_reckoning import dead_reckon, initial_pose_from_gps
 
     ds = datasets.load(name)
     fit = initial_pose_from_gps(ds.odometry, ds.gps, ds.vehicle)
@@ -175,7 +175,7 @@ def check_track_rmse(fn: Callable, *, seed: int = 0, n: int = 4, real=None) -> s
     """Exercise 6.1 (notebook 06 section 3, the track against GPS): ``fn(traj, gps_t,
     gps_xy)`` must return the RMSE (m) of the track's position at the GPS fixes inside the
     track's time span, the track interpolated linearly to each fix time, as
-    :func:`annslam_lib.metrics.trajectory_errors` ``.rmse``; and raise ValueError when no
+    :func:`annslam_lib.evaluation.trajectory.trajectory_errors` ``.rmse``; and raise ValueError when no
     fix lies inside the span. Cases: 4 fixed synthetic drives (gaps, fixes outside the span,
     a spike) plus ``n`` seeded ones; ``real=(traj, gps)`` adds a real run, and
     ``real='victoria_park'`` that run's dead-reckoned track and GPS (:func:`_real_run`). Catches the
@@ -189,7 +189,7 @@ def check_track_rmse(fn: Callable, *, seed: int = 0, n: int = 4, real=None) -> s
     if real is not None:
         traj, gps = real
         if not isinstance(gps, Gps):
-            raise ValueError(f"real must be (trajectory, records.Gps), got {type(gps).__name__}")
+            raise TypeError(f"real must be (trajectory, records.Gps), got {type(gps).__name__}")
         traj = np.asarray(traj, dtype=float)
         table[f"#{len(table)}: the chapter's run, {traj.shape[0]} track samples against "
               f"{len(gps)} GPS fixes"] = (traj, gps.t, gps.xy)
@@ -206,7 +206,7 @@ def check_track_rmse(fn: Callable, *, seed: int = 0, n: int = 4, real=None) -> s
                      why="no fix lies inside the track's time span, so there is nothing to "
                          "compare (an RMSE of no errors is undefined; np.mean would return "
                          "nan with a warning)")
-    ok = f"✓ {name} agrees with metrics.trajectory_errors on {len(table)} drives."
+    ok = f"✓ {name} agrees with evaluation.trajectory.trajectory_errors on {len(table)} drives."
     print(ok)
     return Passed(ok)
 
@@ -332,7 +332,7 @@ def _fix_note(t, xy, i, max_speed, tolerance) -> str:
 def check_gps_outliers(fn: Callable, *, seed: int = 0, n: int = 3, gps: Gps | None = None,
                        max_speed: float = 10.0, tolerance: float = 3.0) -> str:
     """Exercise 6.2 (notebook 06 section 3, GPS outliers): ``fn(t, xy, max_speed,
-    tolerance)`` must return the boolean mask of :func:`annslam_lib.widgets.victoria.
+    tolerance)`` must return the boolean mask of :func:`annslam_lib.evaluation.trajectory.
     gps_outliers`: fix i is an outlier if its step from fix i - 1 is longer than
     max_speed * (t[i] - t[i-1]) + tolerance, unless fix i - 1 is itself an outlier. Cases:
     4 synthetic GPS tracks (spikes, a jump that stays, a gap with a long legitimate move,
@@ -346,7 +346,7 @@ def check_gps_outliers(fn: Callable, *, seed: int = 0, n: int = 3, gps: Gps | No
         gps = _real_run(gps)[1]
     if gps is not None:
         if not isinstance(gps, Gps):
-            raise ValueError(f"gps must be a records.Gps, got {type(gps).__name__}")
+            raise TypeError(f"gps must be a records.Gps, got {type(gps).__name__}")
         table[f"#{len(table)}: the real GPS record, {len(gps)} fixes"] = (gps.t, gps.xy)
     got, exp = {}, {}
     for label, (t, xy) in table.items():
@@ -382,7 +382,7 @@ def check_gps_outliers(fn: Callable, *, seed: int = 0, n: int = 3, gps: Gps | No
         if not (np.array_equal(t, t0) and np.array_equal(xy, xy0)):
             raise GradingError(f"{name} changed its input arrays t or xy in place: work on "
                                f"copies (the caller's GPS record must stay as it was).")
-    ok = (f"✓ {name} agrees with widgets.victoria.gps_outliers on {len(table)} GPS records "
+    ok = (f"✓ {name} agrees with evaluation.trajectory.gps_outliers on {len(table)} GPS records "
           f"({sum(int(e.sum()) for e in exp.values())} outliers).")
     print(ok)
     return Passed(ok)

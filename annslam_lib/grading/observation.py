@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from .. import paper
-from ..observation import inverse_observe, landmark_from_two_points, observe
+from ..models.observation import inverse_observe, landmark_from_two_points, observe
 from .core import forbids, Mistake, call, check_function, check_jacobian, describe, fail
 
 __all__ = ["check_observe", "check_observation_jacobian", "check_inverse_observe",

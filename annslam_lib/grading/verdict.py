@@ -3,9 +3,9 @@
 The verdict rests on error metrics; the exercises grade three of them:
 
 - :func:`check_rigid_align`: the best rigid 2-D motion of the mapped landmarks onto the
-  surveyed ones (Kabsch without scale, no reflection), against ``map_metrics.rigid_align``;
+  surveyed ones (Kabsch without scale, no reflection), against ``evaluation.map.rigid_align``;
 - :func:`check_aligned_rmse`: the map RMSE after that alignment (:func:`aligned_rmse`, the
-  ``map_rmse_aligned`` of ``reproduce.METRICS``);
+  ``map_rmse_aligned`` of ``evaluation.summary.METRICS``);
 - :func:`check_regression`: nntool's regression line and correlation coefficient R of the
   paper's Figure 8 (:func:`regression_line`, what ``ann.regression`` computes per part).
 
@@ -22,7 +22,8 @@ from typing import Callable
 import numpy as np
 
 from .. import ann
-from ..map_metrics import map_errors, rigid_align
+from ..ann.evaluation import regression_line
+from ..evaluation.map import aligned_rmse, map_errors, rigid_align
 from .core import forbids, Passed, GradingError, Mistake, check_function, check_raises
 
 __all__ = ["check_rigid_align", "aligned_rmse", "check_aligned_rmse", "regression_line",
@@ -131,13 +132,13 @@ def _packed(fn: Callable, name: str) -> Callable:
 def check_rigid_align(fn: Callable, *, seed: int = 0, n: int = 6, quiet: bool = False) -> str:
     """Exercise 8.1 (notebook 08, section 4): ``fn(a, b)`` returns the rotation R (2, 2) and
     translation t (2,) minimising sum |R a_i + t - b_i|^2 (Kabsch without scale, no
-    reflection; ``map_metrics.rigid_align``) on seeded point sets and the edge cases of
+    reflection; ``evaluation.map.rigid_align``) on seeded point sets and the edge cases of
     :func:`_pairs`."""
     name = getattr(fn, "__name__", "my_rigid_align")
     msg_ok = check_function(
         _packed(fn, name), _packed(rigid_align, "rigid_align"), _pairs(seed, n), name=name,
         arg_names=["a", "b"], labels=_RT_LABELS, atol=1e-7, rtol=1e-6, quiet=True,
-        what="map_metrics.rigid_align",
+        what="evaluation.map.rigid_align",
         mistakes=[
             Mistake(f"{name} returns a REFLECTION (det R = -1) where a mirror image fits better: "
                     "R = V U^T must be corrected to V diag(1, det(V U^T)) U^T. A map may be "
@@ -162,17 +163,6 @@ def check_rigid_align(fn: Callable, *, seed: int = 0, n: int = 6, quiet: bool = 
     if not quiet:
         print(ok)
     return Passed(ok)
-
-
-def aligned_rmse(a, b) -> float:
-    """Root mean square of the Euclidean distances |R a_i + t - b_i| after the best rigid
-    alignment (``map_metrics.rigid_align``) of the paired points a, b (K, 2), K >= 2 (m):
-    ``map_metrics.map_errors(...).rmse_aligned`` without the matching (notebook 08,
-    exercise 8.2). Raises ValueError for fewer than 2 pairs."""
-    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-    R, t = rigid_align(a, b)
-    d = a @ R.T + t - b
-    return float(np.sqrt(np.mean(np.sum(d * d, axis=1))))
 
 
 def _wrong_rmse(kind: str):
@@ -201,7 +191,7 @@ def check_aligned_rmse(fn: Callable, *, seed: int = 0, n: int = 6, quiet: bool =
     name = getattr(fn, "__name__", "my_aligned_rmse")
     msg_ok = check_function(
         _copying(fn), aligned_rmse, _pairs(seed, n), name=name, arg_names=["mapped", "true"],
-        atol=1e-9, rtol=1e-7, quiet=True, what="the aligned map RMSE (map_metrics)",
+        atol=1e-9, rtol=1e-7, quiet=True, what="the aligned map RMSE (evaluation.map)",
         mistakes=[
             Mistake(f"{name} returns the RMSE WITHOUT the alignment (the absolute error, "
                     "reproduce's map_rmse): apply R, t = rigid_align(mapped, true) to the "
@@ -221,7 +211,7 @@ def check_aligned_rmse(fn: Callable, *, seed: int = 0, n: int = 6, quiet: bool =
                     "rotated points are a @ R.T (R a_i for every row), then + t.",
                     _wrong_rmse("transposed")),
             Mistake(f"{name} lets the alignment mirror the map (det R = -1), which hides a "
-                    "real error; use the rotation of map_metrics.rigid_align.",
+                    "real error; use the rotation of evaluation.map.rigid_align.",
                     _wrong_rmse("reflection")),
             Mistake(f"{name} lets the alignment scale the map, which hides a real error (a "
                     "map that is too small); rotation and translation only.",
@@ -233,27 +223,6 @@ def check_aligned_rmse(fn: Callable, *, seed: int = 0, n: int = 6, quiet: bool =
     if not quiet:
         print(msg_ok)
     return msg_ok
-
-
-def regression_line(outputs, targets) -> tuple[float, float, float]:
-    """nntool's regression plot (paper Figure 8; ``ann.regression`` per part): both
-    coordinates pooled, the least-squares line output = slope * target + intercept and the
-    correlation coefficient R of outputs and targets. outputs, targets (n, 2) or (n,);
-    returns (slope, intercept, R). Raises ValueError for mismatched shapes, fewer than 2
-    values, or constant targets or outputs (R undefined)."""
-    o = np.asarray(outputs, dtype=float)
-    g = np.asarray(targets, dtype=float)
-    if o.shape != g.shape:
-        raise ValueError(f"outputs and targets must have the same shape, got {o.shape} and {g.shape}")
-    o, g = o.ravel(), g.ravel()
-    if o.size < 2 or not (np.all(np.isfinite(o)) and np.all(np.isfinite(g))):
-        raise ValueError("need at least 2 finite values")
-    if np.ptp(g) == 0 or np.ptp(o) == 0:
-        raise ValueError("constant targets or outputs: the correlation R is undefined")
-    do, dg = o - o.mean(), g - g.mean()
-    slope = float(dg @ do / (dg @ dg))
-    r = float(dg @ do / math.sqrt((dg @ dg) * (do @ do)))
-    return slope, float(o.mean() - slope * g.mean()), r
 
 
 def _reg_cases(seed: int, n: int) -> list[tuple]:

@@ -1,0 +1,12 @@
+"""One companion module per notebook: its explorers (widgets) and chapter-only figures,
+so a notebook cell stays one line (as the companion modules of Labbe's Kalman filter book).
+
+Every chapter imports its module under one name and starts with its set-up line::
+
+    from annslam_lib.chapters import ch03_observation as chapter
+    chapter.setup()
+
+Each explorer is built from a pure function (testable without a browser) and a drawing
+callback; the widget keeps its latest result in ``widget.holder["summary"]`` so a headless
+test can move a slider and check what a student would see.
+"""

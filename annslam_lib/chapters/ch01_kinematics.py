@@ -1,0 +1,190 @@
+"""Chapter 01 explorer and figures: the exact turning arc against Euler steps, and
+dead-reckoned paths against GPS.
+
+``arc_vs_euler`` is the pure computation behind the explorer (testable headless);
+``kinematics_explorer`` wraps it in speed / steering / dt sliders and keeps the
+latest result in ``widget.holder["summary"]``.
+"""
+from __future__ import annotations
+
+import math
+
+import matplotlib.pyplot as plt
+import numpy as np
+from ipywidgets import FloatSlider, interactive
+
+from ..models.motion import axle_pose, predict, predict_exact
+from ..evaluation.trajectory import TrajectoryErrors
+from ..plots.data import car_outline
+from ..plots.style import show_widget_figure, widget_figure
+from ..models.vehicle import ACFR_UTE, Vehicle
+from ..plots.style import notebook_setup as setup
+
+__all__ = ["setup", "circumradius", "arc_vs_euler", "plot_arc_vs_euler", "kinematics_explorer",
+           "plot_turning_geometry", "plot_paths", "plot_errors"]
+
+
+def circumradius(p1, p2, p3) -> float:
+    """Radius (m) of the circle through three points (inf if they are collinear):
+    R = |p1 p2| |p2 p3| |p3 p1| / (4 * triangle area)."""
+    p1, p2, p3 = (np.asarray(p, dtype=float) for p in (p1, p2, p3))
+    a, b, c = np.linalg.norm(p2 - p1), np.linalg.norm(p3 - p2), np.linalg.norm(p1 - p3)
+    u, v = p2 - p1, p3 - p1
+    area2 = abs(u[0] * v[1] - u[1] * v[0])            # twice the triangle's area
+    if area2 <= 1e-14 * max(a, b, c) ** 2:
+        return math.inf
+    return float(a * b * c / (2.0 * area2))
+
+
+def arc_vs_euler(speed: float, steering: float, dt: float, vehicle: Vehicle = ACFR_UTE, *,
+                 horizon: float = 3.0, samples: int = 121) -> dict:
+    """The constant-control motion of the car over ``horizon`` s from the origin heading
+    East (notebook 01, "Euler versus the exact arc").
+
+    Returns a dict with: 'exact_laser', 'exact_axle' (samples, 3) poses along the exact
+    arc; 'euler_laser' (n + 1, 3) chained ``motion.predict`` steps of ``dt`` for the
+    laser model and 'euler_axle' the same for the rear-axle model (the laser model
+    with a = b = 0, i.e. the paper's section 2.2 discrete model); 'steps' n =
+    round(horizon / dt); 'radius_axle' and 'radius_laser' measured as the circumradius
+    of three points of each exact path (inf when driving straight); 'radius_formula'
+    L / |tan(alpha)|; 'error_laser', 'error_axle': distance (m) between the Euler end
+    point and the exact pose at n dt.
+    """
+    for name, val in (("speed", speed), ("steering", steering), ("dt", dt), ("horizon", horizon)):
+        if not (isinstance(val, (int, float)) and math.isfinite(val)):
+            raise ValueError(f"{name} must be a finite number, got {val!r}")
+    if dt <= 0 or horizon <= 0:
+        raise ValueError(f"dt and horizon must be > 0, got dt = {dt}, horizon = {horizon}")
+    n = max(1, int(round(horizon / dt)))
+    if n > 10_000:
+        raise ValueError(f"horizon / dt = {horizon / dt:.0f} steps is too many to draw (max 10000)")
+    rear = Vehicle(L=vehicle.L, H=vehicle.H, a=0.0, b=0.0)
+    u = np.array([speed, steering])
+    laser0 = np.array([vehicle.a, vehicle.b, 0.0])          # laser pose with the axle at the origin
+    ts = np.linspace(0.0, n * dt, samples)
+    exact_laser = predict_exact(laser0, u, ts, vehicle)
+    exact_axle, _ = axle_pose(exact_laser, vehicle)
+    out = {"steps": n, "dt": float(dt), "horizon": float(n * dt)}
+    for name, veh, p in (("laser", vehicle, laser0), ("axle", rear, np.zeros(3))):
+        path = [p]
+        for _ in range(n):
+            path.append(predict(path[-1], u, dt, veh)[0])
+        out[f"euler_{name}"] = np.array(path)
+    out["exact_laser"], out["exact_axle"] = exact_laser, exact_axle
+    for name in ("laser", "axle"):
+        ex = out[f"exact_{name}"]
+        i = [0, samples // 2, samples - 1]
+        out[f"radius_{name}"] = circumradius(*ex[i, :2])
+        out[f"error_{name}"] = float(np.linalg.norm(out[f"euler_{name}"][-1, :2] - ex[-1, :2]))
+    t = abs(math.tan(steering))
+    out["radius_formula"] = vehicle.L / t if t > 0 else math.inf
+    return out
+
+
+def plot_arc_vs_euler(summary: dict, ax=None):
+    """Draw a result of :func:`arc_vs_euler`: exact arcs as lines, Euler steps as dots."""
+    if ax is None:
+        _, ax = plt.subplots(figsize=(6, 6))
+    for name, color in (("laser", "tab:red"), ("axle", "tab:blue")):
+        ex, eu = summary[f"exact_{name}"], summary[f"euler_{name}"]
+        ax.plot(ex[:, 0], ex[:, 1], "-", color=color, lw=1.5, label=f"{name}: exact arc")
+        ax.plot(eu[:, 0], eu[:, 1], "o--", color=color, ms=4, lw=0.8, alpha=0.7,
+                label=f"{name}: Euler, {summary['steps']} steps "
+                      f"(end off by {100 * summary[f'error_{name}']:.1f} cm)")
+    ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8, loc="best")
+    return ax
+
+
+def kinematics_explorer(vehicle: Vehicle = ACFR_UTE, *, speed: float = 2.0,
+                        steering: float = 0.3, dt: float = 0.2, horizon: float = 4.0):
+    """Sliders for speed (m/s), steering (rad) and dt (s) drawing the exact arcs of the
+    laser and the rear axle against their Euler steps (notebook 01)."""
+    holder = {}
+
+    def draw(speed: float, steering: float, dt: float) -> None:
+        s = arc_vs_euler(speed, steering, dt, vehicle, horizon=horizon)
+        holder["summary"] = s
+        fig, ax = widget_figure(figsize=(6, 6))  # not pyplot: see widget_figure
+        plot_arc_vs_euler(s, ax)
+        r = s["radius_axle"]
+        ax.set_title(f"rear-axle radius {r:.2f} m (L / tan(alpha) = {s['radius_formula']:.2f} m)"
+                     if math.isfinite(r) else "straight ahead: infinite radius", fontsize=10)
+        show_widget_figure(fig)
+
+    sliders = dict(
+        speed=FloatSlider(value=speed, min=0.0, max=5.0, step=0.1, description="speed [m/s]",
+                          continuous_update=False),
+        steering=FloatSlider(value=steering, min=-0.6, max=0.6, step=0.01,
+                             description="steer [rad]", continuous_update=False),
+        dt=FloatSlider(value=dt, min=0.025, max=1.0, step=0.025, description="dt [s]",
+                       continuous_update=False, readout_format=".3f"))
+    widget = interactive(draw, **sliders)
+    widget.holder = holder
+    return widget
+
+
+def plot_turning_geometry(vehicle: Vehicle = ACFR_UTE, steering: float = 0.35, ax=None):
+    """The turning circle in the rear-axle frame (notebook 01): the car, its steered front
+    wheel, the instantaneous centre of rotation (ICR) at (0, R), R = L / tan(alpha), and
+    the circles of the axle centre C (R), the encoder wheel (R - H) and the laser."""
+    if not 0.05 <= steering < math.pi / 2:
+        raise ValueError(f"steering must be in [0.05, pi/2) rad for this drawing, got {steering!r}")
+    if ax is None:
+        _, ax = plt.subplots(figsize=(7, 7))
+    L, H, a, b = vehicle.L, vehicle.H, vehicle.a, vehicle.b
+    R = L / math.tan(steering)
+    body = car_outline(vehicle)
+    ax.fill(body[:, 0], body[:, 1], color="0.9", ec="0.5", lw=1)
+    wheel = np.array([[-0.35, 0.0], [0.35, 0.0]])
+    for x, y, ang in ((0, H, 0.0), (0, -H, 0.0), (L, H, steering), (L, -H, steering)):
+        c, s = math.cos(ang), math.sin(ang)
+        w = wheel @ np.array([[c, s], [-s, c]]) + [x, y]
+        ax.plot(w[:, 0], w[:, 1], "k-", lw=5, solid_capstyle="butt")
+    ax.plot([0, 0], [-H, R], "k:", lw=0.8)                        # rear-axle line
+    ax.plot([L, 0], [0, R], "k:", lw=0.8)                         # normal to the front wheel
+    ang = np.linspace(-math.pi / 2 - 0.35, -math.pi / 2 + 0.55, 60)
+    marks = (("C (axle centre)", (0.0, 0.0), "tab:blue"),
+             ("encoder wheel", (0.0, H), "tab:green"),
+             ("laser", (a, b), "tab:red"))
+    for label, (x, y), color in marks:
+        r = math.hypot(x, R - y)
+        ax.plot(r * np.cos(ang), R + r * np.sin(ang), "-", color=color, lw=1,
+                label=f"{label}: radius {r:.2f} m")
+        ax.plot([0, x], [R, y], "--", color=color, lw=0.8)
+        ax.plot(x, y, "o", color=color, ms=6)
+    ax.plot(0, R, "k+", ms=12, mew=2)
+    ax.annotate(f"ICR (0, R), R = L / tan(alpha) = {R:.2f} m", (0, R), xytext=(6, -4),
+                textcoords="offset points", fontsize=9)
+    ax.set(xlabel="x forward [m]", ylabel="y left [m]", aspect="equal",
+           xlim=(-3, a + 2.5), ylim=(-2.5, R + 1.5),
+           title=f"Turning circle at steering alpha = {steering:.2f} rad")
+    ax.legend(fontsize=8, loc="lower right")
+    return ax
+
+
+def plot_paths(gps, paths: dict, ax=None, *, title: str = ""):
+    """GPS fixes (dots) against trajectories (K, 4) given as {label: traj}."""
+    if ax is None:
+        _, ax = plt.subplots(figsize=(6, 7))
+    ax.plot(gps.east, gps.north, ".", ms=2, color="k", label="GPS (laser point)")
+    for label, traj in paths.items():
+        ax.plot(traj[:, 1], traj[:, 2], "-", lw=1.2, label=label)
+    ax.plot(gps.east[0], gps.north[0], "o", color="tab:green", ms=8, label="start")
+    ax.set(xlabel="East x [m]", ylabel="North y [m]", aspect="equal", title=title)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8, loc="best")
+    return ax
+
+
+def plot_errors(errors: dict[str, TrajectoryErrors], ax=None, *, title: str = ""):
+    """Position error against GPS over time, one line per {label: TrajectoryErrors}."""
+    if ax is None:
+        _, ax = plt.subplots(figsize=(8, 3.5))
+    for label, e in errors.items():
+        ax.plot(e.t, e.error, lw=1.2, label=f"{label} (RMSE {e.rmse:.2f} m)")
+    ax.set(xlabel="time [s]", ylabel="position error [m]", title=title)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8, loc="best")
+    return ax

@@ -1,0 +1,203 @@
+"""Chapter 06 explorer and figures: one EKF-SLAM run over Victoria Park, scrubbed in time.
+
+Everything is read from ONE stored :class:`~annslam_lib.slam.SlamResult` (no
+re-running): the filter's pose after every scan (``trajectory``, ``pose_cov``), the final
+map (``landmarks``, ``landmark_cov``) and, per landmark, the scans that observed it. The
+map "at time t" is therefore the FINAL estimate of every landmark first seen by t
+(:func:`landmark_first_seen`): the run does not store the map as it was at t.
+
+``gps_outliers`` flags the GPS fixes no car could have reached; ``run_snapshot`` (pure) says where the car is at t, how uncertain, how many landmarks it
+has mapped, and how far it is from the nearest GPS fix; ``draw_run`` draws the map and
+track up to t; ``draw_gps_errors`` the error at every GPS fix (dots only: never a line
+across a GPS gap); ``run_scrubber`` puts them behind a time slider (notebook 06).
+"""
+from __future__ import annotations
+
+import matplotlib.pyplot as plt
+import numpy as np
+from ipywidgets import IntSlider, interactive
+from matplotlib.collections import LineCollection
+
+from ..data.records import Gps
+from ..evaluation.trajectory import TrajectoryErrors, trajectory_errors
+from ..models.uncertainty import ellipse_curves
+from ..plots.style import notebook_setup as setup
+from ..plots.style import show_widget_figure, widget_figure
+from ..slam.results import SlamResult
+
+__all__ = ["setup", "landmark_first_seen", "run_snapshot", "draw_run",
+           "draw_gps_errors", "run_scrubber"]
+
+
+def _check(result, gps) -> None:
+    if not isinstance(result, SlamResult):
+        raise TypeError(f"result must be an slam.results.SlamResult, got {type(result).__name__}")
+    if not isinstance(gps, Gps):
+        raise TypeError(f"gps must be a records.Gps, got {type(gps).__name__}")
+    if result.trajectory.shape[0] < 1:
+        raise ValueError("the run processed no scan: nothing to show")
+
+
+def landmark_first_seen(result: SlamResult) -> np.ndarray:
+    """(M,) time (s) of the scan that first observed each landmark of the final map (the
+    scan that created it), from ``result.landmark_observations``."""
+    if not isinstance(result, SlamResult):
+        raise TypeError(f"result must be an slam.results.SlamResult, got {type(result).__name__}")
+    first = np.array([obs.min() if obs.size else -1 for obs in result.landmark_observations],
+                     dtype=np.int64)
+    if np.any(first < 0):
+        raise ValueError("a landmark of the map has no observation: not a result of slam.runner.run")
+    rows = np.searchsorted(result.scan_index, first)
+    return result.trajectory[rows, 0]
+
+
+def run_snapshot(result: SlamResult, gps: Gps, t: float, *, errors: TrajectoryErrors | None = None,
+                 fix_window: float = 1.0, first_seen: np.ndarray | None = None) -> dict:
+    """The state of the run at time ``t`` (s, inside the span of the processed scans).
+
+    Keys: t; row (index of the last trajectory row at or before t) and scan (its scan);
+    pose (3,) and pose_cov (3, 3) after that scan's update; sigma_xy (m): square root of
+    the largest eigenvalue of the position covariance; landmarks: how many landmarks of
+    the final map had been seen by t; fixes: GPS fixes up to t; since_fix (s): time since
+    the last fix (inf before the first); fix: None if no fix lies within ``fix_window`` s
+    of t (a GPS gap), else a dict with the nearest fix's t, xy and error (m) of the
+    filtered track (``odometry_trajectory``) against it (as ``evaluation.trajectory.trajectory_errors``).
+    ``errors`` and ``first_seen`` may be passed precomputed."""
+    _check(result, gps)
+    if not (isinstance(t, (int, float, np.floating, np.integer)) and np.isfinite(t)):
+        raise ValueError(f"t must be a finite number of seconds, got {t!r}")
+    traj = result.trajectory
+    t0, t1 = float(traj[0, 0]), float(traj[-1, 0])
+    if not t0 <= t <= t1:
+        raise ValueError(f"t = {t} s is outside the run's scans ({t0:.3f}..{t1:.3f} s)")
+    if not (np.isfinite(fix_window) and fix_window >= 0):
+        raise ValueError(f"fix_window must be a non-negative number, got {fix_window!r}")
+    errors = trajectory_errors(result.odometry_trajectory, gps) if errors is None else errors
+    first_seen = landmark_first_seen(result) if first_seen is None else first_seen
+    row = int(np.searchsorted(traj[:, 0], t, side="right") - 1)
+    cov = result.pose_cov[row]
+    n_fix = int(np.searchsorted(gps.t, t, side="right"))
+    fix = None
+    if errors.t.size:
+        i = int(np.argmin(np.abs(errors.t - t)))
+        if abs(errors.t[i] - t) <= fix_window:
+            j = int(np.searchsorted(gps.t, errors.t[i]))
+            fix = {"t": float(errors.t[i]), "xy": gps.xy[j].copy(), "error": float(errors.error[i])}
+    return {"t": float(t), "row": row, "scan": int(result.scan_index[row]),
+            "pose": traj[row, 1:4].copy(), "pose_cov": cov.copy(),
+            "sigma_xy": float(np.sqrt(np.linalg.eigvalsh(cov[:2, :2])[-1])),
+            "landmarks": int(np.count_nonzero(first_seen <= t)), "fixes": n_fix,
+            "since_fix": float(t - gps.t[n_fix - 1]) if n_fix else float("inf"), "fix": fix}
+
+
+def draw_run(result: SlamResult, gps: Gps, t: float | None = None, ax=None, *,
+             n_sigma: float = 2.0, first_seen: np.ndarray | None = None,
+             outliers: np.ndarray | None = None):
+    """The map and track up to ``t`` (default: the end of the run): GPS fixes (blue dots;
+    those flagged in the boolean ``outliers`` as red crosses), the filter's track (black),
+    the landmarks of the final map first seen by t (green) with their ``n_sigma``
+    ellipses, and the pose at t (orange triangle with its position ellipse). The axes
+    frame the whole run (without the outliers), so they do not change with t."""
+    _check(result, gps)
+    traj = result.trajectory
+    t = float(traj[-1, 0]) if t is None else t
+    if ax is None:
+        _, ax = plt.subplots(figsize=(8, 7))
+    first_seen = landmark_first_seen(result) if first_seen is None else first_seen
+    upto = int(np.searchsorted(traj[:, 0], t, side="right"))
+    g = gps.t <= t
+    ok = g if outliers is None else g & ~outliers
+    ax.plot(gps.east[ok], gps.north[ok], ".", ms=2, color="tab:blue", label="GPS fixes")
+    if outliers is not None and np.any(g & outliers):
+        ax.plot(gps.east[g & outliers], gps.north[g & outliers], "x", ms=9, mew=2, color="tab:red",
+                label="GPS outlier")
+    ax.plot(traj[:upto, 1], traj[:upto, 2], "-", lw=0.7, color="k", label="EKF-SLAM track")
+    seen = first_seen <= t
+    if np.any(seen):
+        curves = ellipse_curves(result.landmarks[seen], result.landmark_cov[seen], n_sigma)
+        ax.add_collection(LineCollection(curves, colors="tab:green", linewidths=0.7))
+        ax.plot(result.landmarks[seen, 0], result.landmarks[seen, 1], "+", ms=4,
+                color="tab:green", label=f"landmarks ({seen.sum()}), {n_sigma:g}-sigma")
+    if upto:
+        x, y, phi = traj[upto - 1, 1:4]
+        ax.plot(x, y, marker=(3, 0, np.degrees(phi) - 90), ms=12, color="tab:orange",
+                mec="k", ls="", label="pose", zorder=6)
+        e = ellipse_curves([x, y], result.pose_cov[upto - 1][:2, :2], n_sigma)[0]
+        ax.plot(e[:, 0], e[:, 1], "-", color="tab:orange", lw=1.2)
+    # Frame the whole run (track, map, GPS without its outliers), whatever t is, so that
+    # the view does not jump while the slider moves; a far outlier stays off the figure.
+    pts = [traj[:, 1:3], result.landmarks, gps.xy if outliers is None else gps.xy[~outliers]]
+    lo = np.min([p.min(axis=0) for p in pts if p.size], axis=0) - 5.0
+    hi = np.max([p.max(axis=0) for p in pts if p.size], axis=0) + 5.0
+    ax.set(xlabel="East x [m]", ylabel="North y [m]", aspect="equal", xlim=(lo[0], hi[0]),
+           ylim=(lo[1], hi[1]))
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="upper center", fontsize=8)
+    return ax
+
+
+def draw_gps_errors(errors: TrajectoryErrors, ax=None, *, t: float | None = None,
+                    outliers: np.ndarray | None = None, ylim=(0.0, 16.0)):
+    """Error (m) of the track at every GPS fix against time, as dots (a gap in GPS stays a
+    gap); fixes flagged in ``outliers`` (boolean, one per error) as red crosses, clipped to
+    the top of ``ylim``; a vertical line at ``t``."""
+    if not isinstance(errors, TrajectoryErrors):
+        raise TypeError(f"errors must be a metrics.TrajectoryErrors, got {type(errors).__name__}")
+    if ax is None:
+        _, ax = plt.subplots(figsize=(9, 3))
+    bad = np.zeros(errors.t.size, bool) if outliers is None else np.asarray(outliers, bool)
+    if bad.shape != errors.t.shape:
+        raise ValueError(f"outliers must flag each of the {errors.t.size} errors, got {bad.shape}")
+    ax.plot(errors.t[~bad], errors.error[~bad], ".", ms=2, color="tab:blue", label="error at a fix")
+    if bad.any():
+        ax.plot(errors.t[bad], np.minimum(errors.error[bad], ylim[1] * 0.97), "x", ms=9, mew=2,
+                color="tab:red", label="GPS outlier (clipped)")
+    if t is not None:
+        ax.axvline(t, color="tab:orange", lw=1.5)
+    ax.set(xlabel="t [s]", ylabel="|track - GPS| [m]", ylim=ylim)
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="upper left", fontsize=8)
+    return ax
+
+
+def run_scrubber(result: SlamResult, gps: Gps, *, start: float | None = None, step: int = 5,
+                 outliers: np.ndarray | None = None):
+    """A time slider (whole seconds, ``step`` apart) over one stored run: the map and
+    track up to t (:func:`draw_run`) beside the error at every GPS fix with t marked
+    (:func:`draw_gps_errors`). The latest :func:`run_snapshot` is in
+    ``widget.holder['summary']``. ``outliers``: boolean per GPS fix, drawn as crosses."""
+    _check(result, gps)
+    if isinstance(step, bool) or not isinstance(step, (int, np.integer)) or step < 1:
+        raise ValueError(f"step must be an integer >= 1 (seconds), got {step!r}")
+    errors = trajectory_errors(result.odometry_trajectory, gps)
+    first_seen = landmark_first_seen(result)
+    lo, hi = int(np.ceil(result.trajectory[0, 0])), int(np.floor(result.trajectory[-1, 0]))
+    start = hi if start is None else int(round(start))
+    if not lo <= start <= hi:
+        raise ValueError(f"start = {start} s is outside the run's scans ({lo}..{hi} s)")
+    err_outliers = None
+    if outliers is not None:
+        outliers = np.asarray(outliers, bool)
+        if outliers.shape != gps.t.shape:
+            raise ValueError(f"outliers must flag each of the {gps.t.size} GPS fixes, got {outliers.shape}")
+        err_outliers = outliers[np.searchsorted(gps.t, errors.t)]
+    holder = {}
+
+    def draw(t: int) -> None:
+        s = run_snapshot(result, gps, float(t), errors=errors, first_seen=first_seen)
+        holder["summary"] = s
+        fix = ("no GPS fix within 1 s (gap: last fix {:.1f} s ago)".format(s["since_fix"])
+               if s["fix"] is None else f"error vs GPS {s['fix']['error']:.2f} m")
+        print(f"t = {t} s, scan {s['scan']}: {s['landmarks']} landmarks mapped, position "
+              f"sigma {s['sigma_xy']:.2f} m; {fix}")
+        fig, (a1, a2) = widget_figure(2, 1, figsize=(8, 9), gridspec_kw={"height_ratios": [3, 1]})
+        draw_run(result, gps, float(t), a1, first_seen=first_seen, outliers=outliers)
+        draw_gps_errors(errors, a2, t=float(t), outliers=err_outliers)
+        fig.tight_layout()
+        show_widget_figure(fig)  # not pyplot: see widget_figure
+
+    slider = IntSlider(value=start, min=lo, max=hi, step=step, description="t [s]",
+                       continuous_update=False)
+    widget = interactive(draw, t=slider)
+    widget.holder = holder
+    return widget

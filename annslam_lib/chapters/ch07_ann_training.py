@@ -1,0 +1,86 @@
+"""Chapter 07 explorer: how big should the landmark network be?
+
+Training is cheap (tens of milliseconds), but not cheap enough to retrain at every slider
+move in a lecture, and a slider that retrains would make the plots depend on the
+machine's timing. So :func:`hidden_size_grid` trains the whole grid ONCE (hidden sizes x
+training seeds, each on the chronological 70/15/15 split and in leave-beacons-out
+cross-validation), and :func:`hidden_size_explorer` only looks results up: the slider
+picks the hidden-layer size and the seed, the left panel is that network's performance
+plot (paper Figure 7), the right one the held-out RMSE against the hidden size with the
+inverse-model baseline (notebook 07, "How many neurons?").
+"""
+from __future__ import annotations
+
+import matplotlib.pyplot as plt
+import numpy as np
+from ipywidgets import SelectionSlider, interactive
+
+from ..ann.evaluation import HiddenSizeGrid, grid_summary
+from ..plots.ann import plot_performance
+from ..plots.style import notebook_setup as setup
+from ..plots.style import show_widget_figure, widget_figure
+
+__all__ = ["setup", "plot_hidden_grid",
+           "hidden_size_explorer"]
+
+
+def plot_hidden_grid(grid: HiddenSizeGrid, ax=None, *, hidden: int | None = None,
+                     seed: int | None = None):
+    """Held-out RMSE against the hidden size: mean over seeds (line, +-1 std band) for the
+    chronological test and leave-beacons-out, the inverse-model baselines (dashed) and,
+    if given, the (hidden, seed) network marked. Returns the Figure."""
+    if ax is None:
+        _, ax = plt.subplots(figsize=(6, 4.2))
+    h = np.asarray(grid.hidden, dtype=float)
+    for name, vals, base, color in (("chronological test", grid.chrono, grid.chrono_base, "tab:red"),
+                                    ("leave-beacons-out", grid.lbo, grid.lbo_base, "tab:purple")):
+        if np.all(np.isnan(vals)):
+            continue
+        mu, sd = vals.mean(axis=1), vals.std(axis=1)
+        ax.plot(h, mu, "o-", color=color, label=f"network, {name}", gid=f"mean_{name}")
+        ax.fill_between(h, mu - sd, mu + sd, color=color, alpha=0.2)
+        ax.axhline(base, color=color, ls="--", lw=1.2, label=f"inverse model, {name}",
+                   gid=f"base_{name}")
+        if hidden is not None and seed is not None:
+            i, j = grid.index(hidden, seed)
+            ax.plot([hidden], [vals[i, j]], "s", ms=10, mfc="none", mec="k", mew=1.5,
+                    gid=f"current_{name}")
+    ax.set_xscale("log")
+    ax.set_xticks(h, [str(v) for v in grid.hidden])
+    ax.minorticks_off()
+    ax.set(xlabel="hidden neurons", ylabel="held-out RMSE (m)",
+           title=f"{len(grid.seeds)} seeds per size")
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3)
+    return ax.figure
+
+
+def hidden_size_explorer(grid: HiddenSizeGrid, *, hidden: int | None = None, seed: int | None = None):
+    """Sliders over the precomputed ``grid``: hidden size and seed; the latest
+    :func:`grid_summary` is in ``widget.holder["summary"]``."""
+    if not isinstance(grid, HiddenSizeGrid) or not grid.models:
+        raise ValueError("hidden_size_explorer needs a HiddenSizeGrid from hidden_size_grid")
+    hidden = grid.hidden[len(grid.hidden) // 2] if hidden is None else hidden
+    seed = grid.seeds[0] if seed is None else seed
+    grid.index(hidden, seed)                                   # validates both
+    holder = {}
+
+    def draw(hidden: int, seed: int) -> None:
+        holder["summary"] = s = grid_summary(grid, hidden, seed)
+        fig, (a0, a1) = widget_figure(1, 2, figsize=(12, 4.2))  # not pyplot: see widget_figure
+        plot_performance(grid.models[(hidden, seed)], ax=a0)
+        plot_hidden_grid(grid, ax=a1, hidden=hidden, seed=seed)
+        a1.set_title(f"{hidden} neurons, seed {seed}: test {s['chrono_rmse']:.3f} m, "
+                     f"unseen beacons {s['lbo_rmse']:.3f} m", fontsize=10)
+        fig.tight_layout()
+        show_widget_figure(fig)
+
+    widget = interactive(
+        draw,
+        hidden=SelectionSlider(options=list(grid.hidden), value=hidden, description="hidden",
+                               continuous_update=False),
+        seed=SelectionSlider(options=list(grid.seeds), value=seed, description="seed",
+                             continuous_update=False))
+    widget.holder = holder
+    widget.grid = grid
+    return widget

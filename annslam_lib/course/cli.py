@@ -1,0 +1,296 @@
+"""Command line of the course library.
+
+    python -m annslam_lib data fetch  [name ...]   download + verify (default: the course's datasets)
+    python -m annslam_lib data verify [name ...]   check the sha256 of every file; exit 1 on a problem
+    python -m annslam_lib data where  [name ...]   print the data directory (or dataset folders)
+    python -m annslam_lib data list   [name ...]   print the datasets and how to cite them
+    python -m annslam_lib errata                   the paper's errata as a Markdown table
+    python -m annslam_lib reproduce --out DIR [--fast] [--seeds N]   the paper's figures 5-8 and results table
+    python -m annslam_lib release [--out student] [NOTEBOOK ...]   student versions (no solutions)
+    python -m annslam_lib grade SUBMISSION ... [--json FILE]        grade submissions (sandboxed)
+    python -m annslam_lib exercises                                the graded exercises per notebook
+    python -m annslam_lib workspace                                write/refresh your student copy
+    python -m annslam_lib running --root DIR                       is a course server open on DIR?
+
+Each command is a sub-parser added by an ``_add_<command>`` function that sets ``func``;
+``main`` returns the exit code.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+
+from ..data import fetch
+from ..data import registry
+from ..data.fetch import DataError
+
+_DATA_ACTIONS = {
+    "fetch": "download missing or corrupt files and verify them",
+    "verify": "check every file's sha256 (no download); exit code 1 on any problem",
+    "where": "print the data directory (or, given names, the dataset folders)",
+    "list": "print the datasets with their citation and licence",
+}
+
+
+def _data(args: argparse.Namespace) -> int:
+    try:
+        default = registry.core() if args.action in ("fetch", "verify") else registry.DATASETS
+        entries = [registry.get(n) for n in args.names or default]
+    except ValueError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    if args.action == "where":
+        print("\n".join(str(fetch.data_dir() / e.folder) for e in entries) if args.names
+              else fetch.data_dir())
+        return 0
+    if args.action == "list":
+        for e in entries:
+            size = sum(f.size for f in e.files) / 1e6
+            print(f"{e.name}  ({e.folder}/, {len(e.files)} files, {size:.1f} MB)\n"
+                  f"    cite:    {e.citation}\n    licence: {e.licence}\n    source:  {e.source}")
+        return 0
+    status = 0
+    for e in entries:
+        try:
+            folder = fetch.ensure(e.name, repair=True) if args.action == "fetch" else fetch.verify(e.name)
+            print(f"{e.name}: OK, {len(e.files)} files verified in {folder}")
+        except DataError as err:
+            print(f"{e.name}: FAILED\n{err}", file=sys.stderr)
+            status = 1
+    return status
+
+
+def _add_data(sub) -> None:
+    p = sub.add_parser("data", help="download, verify and locate the course data",
+                       description="\n".join(f"{k:7s} {v}" for k, v in _DATA_ACTIONS.items())
+                       + f"\n\nData directory: ${fetch.ENV_DIR}, else the per-user cache. "
+                       f"Download mirror: ${fetch.ENV_URL}/<folder>/<file>.",
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("action", choices=list(_DATA_ACTIONS))
+    p.add_argument("names", nargs="*", metavar="name",
+                   help=f"dataset(s) among {', '.join(registry.DATASETS)} (default for fetch "
+                        f"and verify: {', '.join(registry.core())}; for where and list: all)")
+    p.set_defaults(func=_data)
+
+
+def _errata(args: argparse.Namespace) -> int:
+    from ..paper import errata_markdown
+
+    print(errata_markdown())
+    return 0
+
+
+def _add_errata(sub) -> None:
+    p = sub.add_parser("errata", help="print the paper's errata with their numerical proofs")
+    p.set_defaults(func=_errata)
+
+
+def _reproduce(args: argparse.Namespace) -> int:
+    from ..paper.report import reproduce
+
+    reproduce(args.out, fast=args.fast, seeds=args.seeds)
+    return 0
+
+
+def _positive_int(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}")
+    return n
+
+
+def _add_reproduce(sub) -> None:
+    p = sub.add_parser("reproduce", help="run the paper's Car Park experiment end to end: "
+                       "Figures 5-8 and the results table",
+                       description="EKF-SLAM beacons only -> training set -> ANN training -> "
+                       "ANN-enhanced EKF-SLAM -> natural-feature EKF-SLAM; writes "
+                       "fig5_map.png .. fig8_regression.png, results.csv and results.md.")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
+    p.add_argument("--fast", action="store_true",
+                   help="a short simulated run instead of the Car Park (seconds; for CI)")
+    p.add_argument("--seeds", type=_positive_int, default=5, metavar="N",
+                   help="training seeds of the ANN (default 5)")
+    p.set_defaults(func=_reproduce)
+
+
+def _course_notebooks() -> list:
+    from pathlib import Path
+
+    folder = Path(__file__).resolve().parents[2] / "notebooks"  # the repository (editable install)
+    found = sorted(folder.glob("*.ipynb"))
+    if not found:
+        raise SystemExit(f"no notebooks found in {folder}: name the instructor notebooks to release")
+    return found
+
+
+def _release(args: argparse.Namespace) -> int:
+    from .release import ReleaseError, exercises, release
+
+    try:
+        written = release(args.notebooks or _course_notebooks(), args.out)
+    except ReleaseError as e:
+        print(f"release: {e}", file=sys.stderr)
+        return 1
+    for path in written:
+        n = len(exercises(path, instructor=False))
+        print(f"{path}  ({n} autograded exercise{'s' if n != 1 else ''})")
+    return 0
+
+
+def _add_release(sub) -> None:
+    p = sub.add_parser("release", help="write student versions of the notebooks (solutions "
+                       "replaced by a NotImplementedError stub, hidden tests removed)",
+                       description="The same transformation as nbgrader's generate_assignment "
+                       "on the cell sources; outputs are cleared.")
+    p.add_argument("notebooks", nargs="*", metavar="NOTEBOOK",
+                   help="instructor notebooks (default: every notebook of the course)")
+    p.add_argument("--out", default="student", metavar="DIR",
+                   help="output folder (default ./student; never the notebooks' own folder)")
+    p.set_defaults(func=_release)
+
+
+def _grade(args: argparse.Namespace) -> int:
+    from .grader import grade_batch
+    from .sandbox import Limits
+
+    limits = Limits(cpu_seconds=int(args.cpu), memory_bytes=int(args.memory * (1 << 30)),
+                    cell_timeout=float(args.timeout), call_timeout=float(args.call_timeout),
+                    deadline=float(args.deadline))
+    results = grade_batch(args.submissions, instructor_dir=args.instructor, json_path=args.json,
+                          limits=limits, isolation=args.isolation)
+    bad = [r for r in results if not r.graded]
+    total = len(results)
+    print(f"graded {total - len(bad)} of {total} submission(s)"
+          + (f"; {len(bad)} could not be graded (reasons above)" if bad else "")
+          + (f"; scores in {args.json}" if args.json else ""))
+    return 1 if bad else 0
+
+
+def _positive_float(text: str) -> float:
+    try:
+        x = float(text)
+    except ValueError:
+        x = 0.0
+    if not x > 0:
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
+    return x
+
+
+def _add_grade(sub) -> None:
+    from .sandbox import ISOLATIONS, Limits
+
+    d = Limits()
+    p = sub.add_parser("grade", help="grade submitted notebooks (sandboxed; scores decided "
+                       "outside the student's code)",
+                       description="Each submission is graded against the instructor notebook "
+                       "of the same file name: only its solution cells are taken, run in a "
+                       "sandboxed kernel with limits, and every test cell (hidden tests "
+                       "included) is run by the grader with the student's functions behind "
+                       "proxies. A submission that cannot be graded is reported with its "
+                       "reason and the others go on. Exit code 1 if any could not be graded.")
+    p.add_argument("submissions", nargs="+", metavar="SUBMISSION",
+                   help="notebooks, or folders to search (e.g. an nbgrader submitted/ folder: "
+                        "submitted/<student>/<assignment>/<notebook>.ipynb)")
+    p.add_argument("--json", metavar="FILE", help="write every submission's result as JSON "
+                   "(rewritten after each one)")
+    p.add_argument("--instructor", metavar="DIR", help="folder of the instructor notebooks "
+                   "(default: the course's notebooks/)")
+    p.add_argument("--isolation", choices=ISOLATIONS, default="auto",
+                   help="auto (default): bubblewrap if it works here, else the user nobody "
+                        "when run as root, else none")
+    p.add_argument("--timeout", type=_positive_float, default=d.cell_timeout, metavar="S",
+                   help=f"per-cell time-out (default {d.cell_timeout:g} s)")
+    p.add_argument("--call-timeout", type=_positive_float, default=d.call_timeout, metavar="S",
+                   help=f"per call of a student's function (default {d.call_timeout:g} s)")
+    p.add_argument("--deadline", type=_positive_float, default=d.deadline, metavar="S",
+                   help=f"wall-clock deadline per notebook (default {d.deadline:g} s)")
+    p.add_argument("--cpu", type=_positive_float, default=d.cpu_seconds, metavar="S",
+                   help=f"CPU seconds per kernel (default {d.cpu_seconds})")
+    p.add_argument("--memory", type=_positive_float, default=d.memory_bytes / (1 << 30),
+                   metavar="GB", help=f"address space per kernel (default "
+                   f"{d.memory_bytes / (1 << 30):g} GB)")
+    p.set_defaults(func=_grade)
+
+
+def _exercises(args: argparse.Namespace) -> int:
+    from .release import exercise_table
+
+    print(exercise_table(args.notebooks or _course_notebooks()))
+    return 0
+
+
+def _add_exercises(sub) -> None:
+    p = sub.add_parser("exercises", help="print the autograded exercises per notebook (Markdown)")
+    p.add_argument("notebooks", nargs="*", metavar="NOTEBOOK")
+    p.set_defaults(func=_exercises)
+
+
+def _workspace(args: argparse.Namespace) -> int:
+    from .workspace import sync, work_dir
+
+    try:
+        report = sync(args.dir or work_dir())
+    except ValueError as e:
+        print(f"workspace: {e}", file=sys.stderr)
+        return 2
+    print(f"== {report.summary()}", file=sys.stderr)
+    for name in report.kept:
+        print(f"   {name}: you have changed it, so it is left as it is (the course's current "
+              f"version: ./course.sh release --out DIR notebooks/{name})", file=sys.stderr)
+    print(report.folder)
+    return 0
+
+
+def _add_workspace(sub) -> None:
+    p = sub.add_parser("workspace", help="write the student versions into your own course "
+                       "folder (new chapters added; notebooks you changed are never overwritten)")
+    p.add_argument("--dir", metavar="DIR", help="the folder (default $ANNSLAM_WORK, else "
+                   "work/<user> in the course checkout)")
+    p.set_defaults(func=_workspace)
+
+
+def _running(args: argparse.Namespace) -> int:
+    from .workspace import running_servers
+
+    servers = running_servers(args.root)
+    for s in servers:
+        token = f"?token={s['token']}" if s.get("token") else ""
+        print(f"== the course is already open on {args.root}: {s['url'].rstrip('/')}/lab{token} "
+              f"(server pid {s.get('pid')}); open that address, or stop that server first "
+              f"(Ctrl-C in its terminal, or kill {s.get('pid')})")
+    return 0 if servers else 1
+
+
+def _add_running(sub) -> None:
+    p = sub.add_parser("running", help="exit 0 and print the address if a Jupyter server of "
+                       "this user already serves DIR, else exit 1")
+    p.add_argument("--root", required=True, metavar="DIR")
+    p.set_defaults(func=_running)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="python -m annslam_lib",
+                                     description="annslam course library: data and tools.")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="command")
+    _add_data(sub)
+    _add_errata(sub)
+    _add_reproduce(sub)
+    _add_release(sub)
+    _add_grade(sub)
+    _add_exercises(sub)
+    _add_workspace(sub)
+    _add_running(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the command line; returns the exit code."""
+    args = build_parser().parse_args(argv)
+    return args.func(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,8 @@
+"""Evaluation layer: how good is a run?
+
+- ``trajectory``: errors of a path against GPS, GPS outliers
+- ``map``: a map against a surveyed one, absolute and after rigid alignment
+- ``consistency``: NEES, NIS and their chi-square bands
+- ``summary``: ``run_metrics``, the one summary of a run every table uses
+- ``timing``: per-step cost of the efficient and dense filters
+"""

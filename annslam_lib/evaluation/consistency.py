@@ -1,0 +1,181 @@
+"""Is a filter consistent? NEES, NIS and their chi-square bands (notebook 05).
+
+A consistent filter's normalised errors are chi-square distributed: the pose NEES
+e^T P^-1 e (3 dof) against the simulator's truth, and the innovation NIS nu^T S^-1 nu (2 dof
+per observation) on any run. A statistic is compared with the band of ITS OWN distribution:
+the average of N independent runs at one scan with the band of an average of N chi-square
+values (:func:`chi2_band`), scan by scan; a time average over hundreds of correlated scans
+cannot be compared with a per-scan band.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import _checks
+from ..data.records import Dataset
+from ..models.geometry import wrap_angle
+from ..models.uncertainty import chi2_quantile
+
+__all__ = ["chi2_quantile", "chi2_band", "Consistency", "nees_consistency", "scan_nis",
+           "nis_consistency", "pose_nees", "correlation_matrix"]
+
+
+def chi2_band(dof, n=1, prob: float = 0.95) -> tuple[np.ndarray | float, np.ndarray | float]:
+    """Two-sided ``prob`` band (lo, hi) of the AVERAGE of ``n`` independent chi-square
+    values of ``dof`` degrees of freedom: chi2.ppf([(1 - prob)/2, (1 + prob)/2], n dof) / n.
+
+    The NEES band of N Monte-Carlo runs (3 dof) is ``chi2_band(3, N)``; the band of a
+    normalised NIS, total NIS / total dof D, is ``chi2_band(1, D)``. ``dof`` and ``n``
+    may be arrays (broadcast); both must be positive. Notebook 05.
+    """
+    p = _checks.probability("prob", prob)
+    d, k = np.asarray(dof, dtype=float), np.asarray(n, dtype=float)
+    if not (np.all(np.isfinite(d)) and np.all(d > 0) and np.all(np.isfinite(k)) and np.all(k > 0)):
+        raise ValueError(f"dof and n must be positive and finite, got {dof!r} and {n!r}")
+    lo = chi2_quantile(0.5 * (1.0 - p), k * d) / k
+    hi = chi2_quantile(0.5 * (1.0 + p), k * d) / k
+    if lo.ndim == 0:
+        return float(lo), float(hi)
+    return lo, hi
+
+
+
+@dataclass(frozen=True)
+class Consistency:
+    """A time-indexed Monte-Carlo consistency statistic and its band (notebook 05).
+
+    t (K,): time of each row (s); value (K,): the run average (NEES) or the normalised
+    sum over runs (NIS / dof); lo, hi (K,): its ``prob`` band; dof (K,): the degrees of
+    freedom behind each row (all runs together); mean: the time average of ``value``
+    (NEES) or total / total dof (NIS); inside: the fraction of rows inside their band;
+    n_runs; prob; name."""
+
+    name: str
+    t: np.ndarray
+    value: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    dof: np.ndarray
+    mean: float
+    inside: float
+    n_runs: int
+    prob: float
+
+    def summary(self) -> str:
+        return (f"{self.name}: time average {self.mean:.3f}, {100 * self.inside:.1f} % of "
+                f"{self.t.size} scans inside the {100 * self.prob:.0f} % band "
+                f"({self.n_runs} runs)")
+
+
+
+def _stack(name: str, runs) -> np.ndarray:
+    rows = [np.asarray(r, dtype=float) for r in runs]
+    if not rows:
+        raise ValueError(f"{name}: no runs given")
+    if any(r.ndim != 1 for r in rows):
+        raise ValueError(f"{name}: every run must be a one-dimensional array")
+    lengths = {r.size for r in rows}
+    if len(lengths) != 1:
+        raise ValueError(f"{name}: the runs have different lengths {sorted(lengths)}; the "
+                         "time-indexed average needs the same scans in every run")
+    out = np.array(rows)
+    if not np.all(np.isfinite(out)):
+        raise ValueError(f"{name}: non-finite values")
+    return out
+
+
+
+def _times(t, K: int) -> np.ndarray:
+    t = np.arange(K, dtype=float) if t is None else np.asarray(t, dtype=float)
+    if t.shape != (K,):
+        raise ValueError(f"t must have shape ({K},), got {t.shape}")
+    return t
+
+
+
+def nees_consistency(nees_runs, t=None, *, dof: int = 3, prob: float = 0.95) -> Consistency:
+    """Average NEES over runs at each time (``nees_runs``: one (K,) array per run, the
+    same K scans in each, e.g. ``evaluation.consistency.pose_nees``), against the band of the average
+    of N chi2(dof) values (:func:`chi2_band`). ``mean`` is the time average (ANEES)."""
+    X = _stack("nees_runs", nees_runs)
+    n, K = X.shape
+    value = X.mean(axis=0)
+    lo, hi = chi2_band(dof, n, prob)
+    lo_a, hi_a = np.full(K, lo), np.full(K, hi)
+    return Consistency(name=f"average NEES ({dof} dof)", t=_times(t, K), value=value,
+                       lo=lo_a, hi=hi_a, dof=np.full(K, float(n * dof)), mean=float(value.mean()),
+                       inside=float(np.mean((value >= lo) & (value <= hi))), n_runs=n,
+                       prob=_checks.probability("prob", prob))
+
+
+
+def scan_nis(result, n_scans: int) -> tuple[np.ndarray, np.ndarray]:
+    """The laser-update NIS and its dof of every scan 0..n_scans-1 of an
+    ``slam.results.SlamResult`` (0 and 0 where a scan had no update; GPS updates left out)."""
+    nis = result.nis
+    k = nis["kind"] == 0
+    scans = nis["scan"][k]
+    if scans.size and (scans.min() < 0 or scans.max() >= n_scans):
+        raise ValueError(f"scan indices {scans.min()}..{scans.max()} outside 0..{n_scans - 1}")
+    value, dof = np.zeros(n_scans), np.zeros(n_scans)
+    value[scans] = nis["nis"][k]
+    dof[scans] = nis["dof"][k]
+    return value, dof
+
+
+
+def nis_consistency(nis_runs, dof_runs, t=None, *, prob: float = 0.95) -> Consistency:
+    """Normalised NIS at each scan: sum over runs of NIS / sum of dof, with the band
+    ``chi2_band(1, D)`` for the D dof of that scan (one (K,) array per run each, as from
+    :func:`scan_nis`). Scans without any update in any run are dropped. ``mean`` is
+    the total NIS over the total dof."""
+    S, D = _stack("nis_runs", nis_runs), _stack("dof_runs", dof_runs)
+    if S.shape != D.shape:
+        raise ValueError(f"nis_runs {S.shape} and dof_runs {D.shape} differ in shape")
+    s, d = S.sum(axis=0), D.sum(axis=0)
+    keep = d > 0
+    if not keep.any():
+        raise ValueError("no scan has an update in any run")
+    t = _times(t, S.shape[1])[keep]
+    s, d = s[keep], d[keep]
+    value = s / d
+    lo, hi = chi2_band(1, d, prob)
+    return Consistency(name="NIS / dof", t=t, value=value, lo=lo, hi=hi, dof=d,
+                       mean=float(s.sum() / d.sum()),
+                       inside=float(np.mean((value >= lo) & (value <= hi))),
+                       n_runs=S.shape[0], prob=_checks.probability("prob", prob))
+
+
+
+def correlation_matrix(P) -> np.ndarray:
+    """Correlation coefficients C_ij = P_ij / sqrt(P_ii P_jj) of a covariance (n, n).
+    Raises ValueError for a non-square, non-finite or non-symmetric P, or a diagonal
+    entry <= 0 (a variable without uncertainty has no correlation)."""
+    P = np.asarray(P, dtype=float)
+    if P.ndim != 2 or P.shape[0] != P.shape[1]:
+        raise ValueError(f"P must be a square matrix, got shape {P.shape}")
+    if not np.all(np.isfinite(P)):
+        raise ValueError("P contains NaN or infinite values")
+    scale = max(float(np.max(np.abs(P))), 1e-300) if P.size else 1.0
+    if P.size and np.max(np.abs(P - P.T)) > 1e-9 * scale:
+        raise ValueError("P is not symmetric")
+    d = np.diag(P)
+    if np.any(d <= 0):
+        raise ValueError(f"P has a non-positive variance at index {int(np.argmin(d))}")
+    s = np.sqrt(d)
+    C = P / np.outer(s, s)
+    return np.clip(0.5 * (C + C.T), -1.0, 1.0)
+
+
+def pose_nees(result, dataset: Dataset) -> np.ndarray:
+    """Normalised estimation error squared of the pose at every trajectory row (3 dof),
+    e^T P^-1 e with e = estimate - truth (heading wrapped), against the simulator's true
+    laser poses at the scan times (``dataset.info['scan_poses']``). Notebook 05."""
+    if dataset.truth is None or "scan_poses" not in dataset.info:
+        raise ValueError("pose_nees needs a simulated dataset (with info['scan_poses'])")
+    truth = np.asarray(dataset.info["scan_poses"])[result.scan_index]
+    e = result.trajectory[:, 1:4] - truth
+    e[:, 2] = wrap_angle(e[:, 2])
+    return np.einsum("ki,ki->k", e, np.linalg.solve(result.pose_cov, e[..., None])[..., 0])

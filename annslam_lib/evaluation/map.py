@@ -1,0 +1,128 @@
+"""Accuracy of an estimated map against a surveyed one (notebook 05 "the Car Park map").
+
+Mapped landmarks are matched one-to-one to the true ones by the assignment that
+minimises the total distance (Hungarian algorithm, ``scipy.optimize.linear_sum_assignment``);
+a pair farther apart than ``max_distance`` is not a match. Two errors are reported:
+
+- absolute: the distances of the matched pairs as they are (the map in the GPS frame);
+- aligned: after the best rigid 2-D motion (rotation + translation, no scale) applied to
+  the mapped landmarks, the Kabsch / Umeyama least-squares solution: with centroids
+  a_bar, b_bar and the cross-covariance C = sum (a_i - a_bar)(b_i - b_bar)^T,
+  R = V diag(1, det(V U^T)) U^T from C = U Sigma V^T, t = b_bar - R a_bar.
+  This is the map's shape error, free of the frame error that SLAM cannot observe.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import _checks
+from scipy.optimize import linear_sum_assignment
+
+
+__all__ = ["rigid_align", "match_landmarks", "MapErrors", "map_errors", "aligned_rmse"]
+
+
+def rigid_align(a, b) -> tuple[np.ndarray, np.ndarray]:
+    """Rotation R (2, 2) and translation t (2,) minimising sum |R a_i + t - b_i|^2
+    (Kabsch, no scale, reflections excluded). a, b (K, 2) paired points, K >= 2 and
+    not all coincident. Raises ValueError otherwise."""
+    a, b = _checks.points("a", a), _checks.points("b", b)
+    if a.shape != b.shape:
+        raise ValueError(f"a and b must have the same shape, got {a.shape} and {b.shape}")
+    if a.shape[0] < 2:
+        raise ValueError(f"rigid alignment needs at least 2 point pairs, got {a.shape[0]}")
+    ca, cb = a.mean(axis=0), b.mean(axis=0)
+    da, db = a - ca, b - cb
+    if np.max(np.abs(da)) == 0.0:
+        raise ValueError("the points of a all coincide: the rotation is undefined")
+    U, _, Vt = np.linalg.svd(da.T @ db)
+    d = np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0
+    R = Vt.T @ np.diag([1.0, d]) @ U.T
+    return R, cb - R @ ca
+
+
+def match_landmarks(mapped, true, max_distance: float = math.inf) -> tuple[np.ndarray, np.ndarray]:
+    """One-to-one matching (Hungarian, minimum total distance) of mapped (M, 2) to true
+    (T, 2) landmarks; pairs farther than ``max_distance`` metres are dropped.
+    Returns (i_mapped, j_true), index arrays of equal length."""
+    mapped, true = _checks.points("mapped", mapped), _checks.points("true", true)
+    max_distance = _checks.real("max_distance", max_distance, lo=0.0, strict=True, finite=False)
+    if mapped.shape[0] == 0 or true.shape[0] == 0:
+        return np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64)
+    d = np.hypot(mapped[:, None, 0] - true[None, :, 0], mapped[:, None, 1] - true[None, :, 1])
+    i, j = linear_sum_assignment(d)
+    ok = d[i, j] <= max_distance
+    return i[ok].astype(np.int64), j[ok].astype(np.int64)
+
+
+@dataclass(frozen=True)
+class MapErrors:
+    """Result of :func:`map_errors`.
+
+    i_mapped, j_true: the matched pairs; error (K,): their distances (m) as mapped;
+    error_aligned (K,): after the best rigid alignment; rmse, rmse_aligned, max,
+    max_aligned (m); rotation (rad) and translation (2,) of that alignment (mapped ->
+    true); missed: true landmarks without a match; spurious: mapped landmarks without a
+    match; duplicates: the spurious ones lying within ``max_distance`` of a true
+    landmark (a second copy of a mapped landmark).
+    """
+
+    i_mapped: np.ndarray
+    j_true: np.ndarray
+    error: np.ndarray
+    error_aligned: np.ndarray
+    rmse: float
+    rmse_aligned: float
+    max: float
+    max_aligned: float
+    rotation: float
+    translation: np.ndarray
+    missed: int
+    spurious: int
+    duplicates: int
+
+    def summary(self) -> str:
+        return (f"{self.i_mapped.size} matched, {self.missed} missed, {self.spurious} spurious "
+                f"({self.duplicates} duplicates); RMSE {self.rmse:.3f} m absolute, "
+                f"{self.rmse_aligned:.3f} m after alignment "
+                f"({math.degrees(self.rotation):.2f} deg, {np.hypot(*self.translation):.3f} m)")
+
+
+def map_errors(mapped, true, *, max_distance: float = 1.0) -> MapErrors:
+    """Match ``mapped`` (M, 2) to ``true`` (T, 2) landmarks (:func:`match_landmarks`) and
+    measure the errors absolute and after the best rigid alignment of the matched pairs
+    (module docstring). Needs at least 2 matches."""
+    mapped, true = _checks.points("mapped", mapped), _checks.points("true", true)
+    i, j = match_landmarks(mapped, true, max_distance)
+    if i.size < 2:
+        raise ValueError(f"only {i.size} mapped landmark(s) lie within max_distance = "
+                         f"{max_distance} m of a true one: need 2 to align")
+    a, b = mapped[i], true[j]
+    err = np.hypot(*(a - b).T)
+    R, t = rigid_align(a, b)
+    err_al = np.hypot(*(a @ R.T + t - b).T)
+    rest = np.setdiff1d(np.arange(mapped.shape[0]), i)
+    near = 0
+    if rest.size:
+        d = np.hypot(mapped[rest, None, 0] - true[None, :, 0], mapped[rest, None, 1] - true[None, :, 1])
+        near = int(np.sum(d.min(axis=1) <= max_distance))
+    return MapErrors(i_mapped=i, j_true=j, error=err, error_aligned=err_al,
+                     rmse=float(np.sqrt(np.mean(err**2))),
+                     rmse_aligned=float(np.sqrt(np.mean(err_al**2))),
+                     max=float(err.max()), max_aligned=float(err_al.max()),
+                     rotation=float(math.atan2(R[1, 0], R[0, 0])), translation=t,
+                     missed=int(true.shape[0] - i.size), spurious=int(rest.size), duplicates=near)
+
+
+def aligned_rmse(a, b) -> float:
+    """Root mean square of the Euclidean distances |R a_i + t - b_i| after the best rigid
+    alignment (:func:`rigid_align`) of the paired points a, b (K, 2), K >= 2 (m):
+    :func:`map_errors` ``.rmse_aligned`` without the matching (notebook 08,
+    exercise 8.2). Raises ValueError for fewer than 2 pairs."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    R, t = rigid_align(a, b)
+    d = a @ R.T + t - b
+    return float(np.sqrt(np.mean(np.sum(d * d, axis=1))))

@@ -1,0 +1,8 @@
+"""Figures: one style module and the chapters' shared plots.
+
+- ``style``: ``notebook_setup()`` (every chapter's first line), the axes helper, widget figures
+- ``data``: the runs (maps, scans, the car)
+- ``slam``: Figure 5, landmark zooms, correlations, consistency bands
+- ``ann``: the network's figures (the paper's Figures 6-8)
+- ``paper``: the verdict's figures
+"""

@@ -1,0 +1,20 @@
+"""SLAM layer: the EKF over a whole run.
+
+- ``config``: ``SlamConfig``, every choice of a run (defaults per dataset live with the data)
+- ``base``: errors, the start check, the ``FilterBackend`` and ``LandmarkModel`` interfaces
+- ``efficient``: the filter written to scale (``EkfSlam``)
+- ``dense``: the textbook dense reference it is tested against, and the update's steps
+- ``runner``: ``run()``, the event loop, landmark book-keeping and result assembly
+- ``results``: ``SlamResult`` and the per-detection log
+- ``dead_reckoning``: odometry alone, and the initial pose from GPS
+- ``threads``: single-threaded BLAS while a run goes
+"""
+from __future__ import annotations
+
+from .._lazy import attach
+
+__getattr__, __dir__, __all__ = attach(
+    __name__, ["config", "base", "efficient", "dense", "runner", "results", "dead_reckoning",
+               "threads"],
+    {"run": "runner", "SlamConfig": "config", "SlamResult": "results", "EkfSlam": "efficient",
+     "DenseEkfSlam": "dense"})

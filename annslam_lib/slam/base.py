@@ -1,0 +1,88 @@
+"""What every EKF-SLAM backend shares: its errors, the start check, and the two interfaces
+the run loop (:mod:`annslam_lib.slam.runner`) talks to.
+
+:class:`FilterBackend` is what a filter must offer the loop: the efficient filter
+(:mod:`~annslam_lib.slam.efficient`) and the dense textbook reference (:mod:`~annslam_lib.
+slam.dense`) both implement it, and the loop uses nothing else of them. :class:`LandmarkModel`
+is what turns a detection into the measurement the filter uses (the ANN of chapter 08).
+"""
+from __future__ import annotations
+
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from .. import _checks
+from ..models.vehicle import Vehicle
+from .config import MOTION_MODELS
+
+__all__ = ["InnovationError", "check_initial", "FilterBackend", "LandmarkModel"]
+
+
+class InnovationError(ValueError):
+    """The innovation covariance S of an update is not positive definite (singular):
+    no gain exists. Typically zero measurement noise on a perfectly known state."""
+
+
+
+def check_initial(x0, P0, vehicle: Vehicle, motion_model: str) -> tuple[np.ndarray, np.ndarray]:
+    """Validate a filter's start (shared by :class:`EkfSlam` and the dense reference):
+    x0 (3,) and P0 (3, 3) finite, P0 symmetric PSD, a Vehicle, a known motion model.
+    Returns float copies of x0 and P0."""
+    _checks.choice("motion_model", motion_model, MOTION_MODELS)
+    x0 = _checks.array("x0", x0).copy()
+    P0 = _checks.array("P0", P0).copy()
+    if x0.shape != (3,) or P0.shape != (3, 3):
+        raise ValueError(f"x0 must be (3,) and P0 (3, 3), got {x0.shape} and {P0.shape}")
+    if np.max(np.abs(P0 - P0.T)) > 1e-12 * max(1.0, np.max(np.abs(P0))):
+        raise ValueError("initial covariance P0 must be symmetric")
+    if np.min(np.linalg.eigvalsh(P0)) < -1e-12:
+        raise ValueError("initial covariance P0 must be positive semi-definite")
+    _checks.instance("vehicle", vehicle, Vehicle)
+    return x0, P0
+
+
+
+@runtime_checkable
+class FilterBackend(Protocol):
+    """The filter as the run loop sees it (laser pose + landmarks, their covariance).
+
+    Construction: ``Backend(x0, P0, vehicle, motion_model)``. Prediction: ``predict(u, dt)``
+    with a row ``u`` of ``models.motion.control_table`` (the control held over the step,
+    with its noise); ``predict_many(rows, dts)`` runs a stretch of such steps in one call.
+    Observation: ``observation_model(sigma_range, sigma_bearing)`` -> (zhat (N, 2), S
+    (N, 2, 2)) for gating every landmark; ``update(z, lm, sigma_range, sigma_bearing)`` ->
+    (NIS, dof) for the associated detections; ``gps_update(xy, sigma, gate)`` -> (NIS,
+    accepted); ``augment(z, sigma_range, sigma_bearing)`` -> indices of the new landmarks;
+    ``remove(idx)`` marginalises landmarks out. Read access: ``pose`` (3,), ``pose_cov``
+    (3, 3), ``pose_cov_entries()`` (its six unique entries, cheap), ``n_landmarks``,
+    ``state()`` -> (x, P), ``health()`` -> (min eigenvalue, asymmetry)."""
+
+    n_landmarks: int
+
+    def predict(self, u, dt: float) -> None: ...
+    def predict_many(self, rows, dts) -> None: ...
+    def observation_model(self, sigma_range: float, sigma_bearing: float): ...
+    def update(self, z, lm, sigma_range: float, sigma_bearing: float): ...
+    def gps_update(self, xy, sigma_gps: float, gate: float = ...): ...
+    def augment(self, z, sigma_range: float, sigma_bearing: float): ...
+    def remove(self, idx) -> None: ...
+    @property
+    def pose(self) -> np.ndarray: ...
+    @property
+    def pose_cov(self) -> np.ndarray: ...
+    def pose_cov_entries(self) -> tuple: ...
+    def state(self) -> tuple[np.ndarray, np.ndarray]: ...
+    def health(self) -> tuple[float, float]: ...
+
+
+@runtime_checkable
+class LandmarkModel(Protocol):
+    """A learned landmark model (chapter 08; ``ann.TrainedModel``, ``ann.InverseModel``):
+    ``pseudo_measurement(pose, z, intensity, width)`` -> z' (n, 2) replaces the detections
+    z (n, 2) seen from the prior ``pose``; ``sigmas`` = (sigma_range, sigma_bearing) is its
+    noise, which replaces the laser's."""
+
+    sigmas: tuple
+
+    def pseudo_measurement(self, pose, z, intensity, width) -> np.ndarray: ...

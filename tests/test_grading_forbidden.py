@@ -1,0 +1,97 @@
+"""Every check names the library functions its exercise asks the student to write: the
+notebook's own solution passes with the rule on, and a "solution" that calls the library's
+function instead fails with "my_f calls module.function: write it yourself"."""
+import numpy as np
+import pytest
+
+from annslam_lib.ann import network
+from annslam_lib.evaluation import map as map_eval
+from annslam_lib.evaluation import trajectory
+from annslam_lib.grading import GradingError
+from annslam_lib.grading import association as ga
+from annslam_lib.grading import ekf as ge
+from annslam_lib.grading import kinematics as gkin
+from annslam_lib.grading import metrics as gm
+from annslam_lib.grading import observation as gobs
+from annslam_lib.grading import verdict as gv
+from annslam_lib.models import motion, observation
+from annslam_lib.models.vehicle import Vehicle
+from annslam_lib.perception import association
+from annslam_lib.slam import dense
+
+from solutions import solution
+
+
+def _car(L, a, b, H=0.76):
+    return Vehicle(L=L, H=H, a=a, b=b)
+
+
+# (check, notebook, function, a "solution" that calls the forbidden library function, its name)
+CASES = [
+    (gkin.check_axle_speed, "01", "my_axle_speed",
+     lambda v, al, H, L: motion.axle_speed(v, al, _car(L, 3.78, 0.5, H))[0], "models.motion.axle_speed"),
+    (gkin.check_euler_step, "01", "my_euler_step",
+     lambda p, u, dt, L, a, b: motion.predict(p, u, dt, _car(L, a, b))[0], "models.motion.predict"),
+    (gkin.check_laser_pose, "02", "my_laser_pose",
+     lambda p, a, b: motion.laser_pose(p, _car(2.83, a, b))[0], "models.motion.laser_pose"),
+    (gkin.check_laser_velocity, "02", "my_laser_velocity",
+     lambda p, u, L, a, b: motion.laser_velocity(p, u, _car(L, a, b)), "models.motion.laser_velocity"),
+    (gobs.check_observe, "03", "my_observe",
+     lambda p, m: observation.observe(p, m)[0], "models.observation.observe"),
+    (gobs.check_inverse_observe, "03", "my_inverse_observe",
+     lambda p, z: observation.inverse_observe(p, z)[0], "models.observation.inverse_observe"),
+    (gobs.check_two_point_frame, "03", "my_two_point_frame",
+     lambda a, b: observation.landmark_from_two_points(a, b)[0],
+     "models.observation.landmark_from_two_points"),
+    (ga.check_associate, "04", "my_associate",
+     lambda d2, g, n: association.associate(d2, g, n), "perception.association.associate"),
+    (ge.check_joseph_covariance, "05", "my_joseph_covariance",
+     lambda P, H, R, K: dense.joseph_covariance(P, H, R, K), "slam.dense.joseph_covariance"),
+    (gm.check_gps_outliers, "06", "my_gps_outliers",
+     lambda t, xy, m=10.0, tol=3.0: trajectory.gps_outliers(
+         trajectory.Gps(t=t, east=xy[:, 0], north=xy[:, 1]), m, tol),
+     "evaluation.trajectory.gps_outliers"),
+    (gv.check_rigid_align, "08", "my_rigid_align",
+     lambda a, b: map_eval.rigid_align(a, b), "evaluation.map.rigid_align"),
+]
+
+
+@pytest.mark.parametrize("check, chapter, name, shortcut, target", CASES,
+                         ids=[c[2] for c in CASES])
+def test_the_notebook_solution_passes_and_the_library_shortcut_does_not(check, chapter, name,
+                                                                        shortcut, target):
+    out = check(solution(chapter, name), quiet=True) if "quiet" in check.__code__.co_varnames \
+        else check(solution(chapter, name))
+    assert out.startswith("✓")
+    shortcut.__name__ = name
+    with pytest.raises(GradingError, match=rf"{name} calls annslam_lib\.{target}: write it yourself"):
+        check(shortcut)
+
+
+def test_every_check_of_the_course_declares_what_it_forbids():
+    import annslam_lib.grading as grading
+    import importlib
+    import pkgutil
+
+    checks = []
+    for m in pkgutil.iter_modules(grading.__path__):
+        mod = importlib.import_module(f"annslam_lib.grading.{m.name}")
+        checks += [getattr(mod, n) for n in dir(mod) if n.startswith("check_") and m.name != "core"
+                   and getattr(getattr(mod, n), "__module__", "") == mod.__name__]
+    assert len(checks) >= 24
+    missing = [c.__name__ for c in checks if not getattr(c, "__annslam_forbids__", ())]
+    assert missing == [], f"checks without forbidden library functions: {missing}"
+
+
+def test_the_rule_is_found_through_aliases_and_getattr():
+    def sneaky(pose, landmark):
+        mod = __import__("annslam_lib.models.observation", fromlist=["x"])
+        return getattr(mod, "obs" + "erve")(pose, landmark)[0]
+    sneaky.__name__ = "my_observe"
+    with pytest.raises(GradingError, match="my_observe calls annslam_lib.models.observation.observe"):
+        gobs.check_observe(sneaky)
+    forward = network.forward
+    with pytest.raises(GradingError, match="write it yourself"):
+        from annslam_lib.grading import ann as gann
+        gann.check_forward(lambda *a: forward(*a))
+    assert np.isfinite(1.0)
