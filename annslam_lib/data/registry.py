@@ -1,9 +1,9 @@
 """The datasets the course uses: files, sha256 hashes, sizes, public sources, citations,
 and each run's EKF-SLAM defaults.
 
-The values come from each dataset's provenance notes (its PROVENANCE.md and SHA256SUMS,
-shipped with the course's copy of the data). A file's default download URL is the raw
-GitHub URL of the exact commit it was taken from,
+The values come from each dataset's provenance notes (summarised in the repository's
+data/README.md). A file's default download URL is the raw GitHub URL of the exact commit it
+was taken from,
 ``https://raw.githubusercontent.com/{repo}/{commit}/{path}``.
 
 Adding a dataset: an entry here (files, citation, ``filter_defaults``) and its parser in

@@ -48,7 +48,7 @@ from ..models.vehicle import ACFR_UTE, Vehicle
 __all__ = ["SimConfig", "Route", "simulate", "make_route", "place_beacons", "ROUTES",
            "STREAMS", "ODOMETRY_DT", "LASER_DT", "GPS_DT", "MAX_STEER", "NO_RETURN"]
 
-#: Sample periods of the Car Park run (PROVENANCE.md): 40 Hz, ~4.7 Hz, 5 Hz.
+#: Sample periods of the Car Park run (data/README.md): 40 Hz, ~4.7 Hz, 5 Hz.
 ODOMETRY_DT = 0.025
 LASER_DT = 0.2135
 GPS_DT = 0.2

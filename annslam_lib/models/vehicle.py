@@ -4,7 +4,7 @@ The state every filter in the course estimates is the pose of the *laser*
 (x, y, phi): position of the laser in the world frame and heading of the car.
 The laser sits ``a`` metres ahead of the rear-axle centre and ``b`` metres to
 its left; the speed encoder is on the back-left wheel, ``H`` metres left of
-the rear-axle centre; ``L`` is the wheelbase (PROVENANCE.md of both runs).
+the rear-axle centre; ``L`` is the wheelbase (the course's data notes, data/README.md).
 """
 from __future__ import annotations
 
@@ -35,6 +35,6 @@ class Vehicle:
             raise ValueError(f"Vehicle.L (wheelbase) must be positive, got {self.L}")
 
 
-#: The ute of the Car Park run (PROVENANCE: a = 3.78 m ahead of the rear axle,
+#: The ute of both ACFR runs (data/README.md: a = 3.78 m ahead of the rear axle,
 #: b = 1.21 - 1.42/2 = 0.5 m to the side).
 ACFR_UTE = Vehicle(L=2.83, H=0.76, a=3.78, b=0.50)

@@ -29,6 +29,7 @@ from .base import InnovationError, check_initial
 from ..models.geometry import wrap_angle
 from ..models.observation import inverse_observe, observe
 from ..models.vehicle import Vehicle
+from ..perception.association import mahalanobis_fast
 
 __all__ = ["DenseEkfSlam", "augment_landmark", "innovation", "kalman_gain", "joseph_covariance",
            "joseph_update", "range_bearing_update"]
@@ -45,24 +46,27 @@ class DenseEkfSlam:
         self.x[2] = float(wrap_angle(self.x[2]))
         self.P = 0.5 * (P0 + P0.T)
 
-    # Names the run loop reads.
-    @property
-    def _px(self) -> float:
-        return float(self.x[0])
+    # The read access of slam.base.FilterBackend.
+    def pose_tuple(self) -> tuple[float, float, float]:
+        return float(self.x[0]), float(self.x[1]), float(self.x[2])
 
-    @property
-    def _py(self) -> float:
-        return float(self.x[1])
-
-    @property
-    def _pphi(self) -> float:
-        return float(self.x[2])
-
-    @property
-    def _p(self) -> list:
+    def pose_cov_entries(self) -> tuple:
         """The pose covariance's unique entries (00, 01, 02, 11, 12, 22)."""
         P = self.P
-        return [P[0, 0], P[0, 1], P[0, 2], P[1, 1], P[1, 2], P[2, 2]]
+        return (P[0, 0], P[0, 1], P[0, 2], P[1, 1], P[1, 2], P[2, 2])
+
+    def predict_many(self, u, t: float, times, rows, *, record: bool = True):
+        """:meth:`predict` over a stretch of odometry samples (``slam.base.FilterBackend``):
+        the textbook loop, one dense prediction per sample."""
+        n, poses = 0, [] if record else None
+        for tk, row in zip(times, rows):
+            if tk > t and u is not None:
+                self.predict(u, tk - t)
+                n += 1
+            if record:
+                poses.append((tk, *self.pose_tuple()))
+            u, t = row, tk
+        return u, t, n, poses
 
     @property
     def n_landmarks(self) -> int:
@@ -129,6 +133,15 @@ class DenseEkfSlam:
             zhat[j] = zj[0]
             S[j] = H @ self.P @ H.T + R
         return zhat, S
+
+    def innovation_d2(self, z, sigma_range: float, sigma_bearing: float) -> np.ndarray:
+        """d2 (n, N) of detections z to every landmark (``slam.base.FilterBackend``):
+        :meth:`observation_model` and ``perception.association.mahalanobis_fast``."""
+        zhat, S = self.observation_model(sigma_range, sigma_bearing)
+        z = np.asarray(z, dtype=float)
+        if zhat.shape[0] == 0:
+            return np.empty((z.shape[0], 0))
+        return mahalanobis_fast(z, zhat, S)
 
     def _kalman(self, H, nu, R, gate=np.inf):
         S = H @ self.P @ H.T + R

@@ -61,6 +61,7 @@ from scipy.linalg.lapack import dpotrf, dtrtrs
 
 from ..models.geometry import wrap_angle, wrap_difference
 from ..models.observation import inverse_observe, observe_fast
+from ..perception.association import mahalanobis
 from ..models.vehicle import Vehicle
 from .base import InnovationError, check_initial
 
@@ -124,48 +125,75 @@ class EkfSlam:
 
     def predict(self, u, dt: float) -> None:
         """One Euler step of ``motion.predict`` of length ``dt`` with the control row
-        ``u`` of :func:`control_table`, process noise dt * Delta B Q_c B^T (scalar code:
-        the vehicle block only; the cross covariance waits for :meth:`flush`)."""
-        if dt <= 0.0:
-            return
-        v, _, ta, w, dw, q00, q01, q11, span = u
-        a, b, L = self._a, self._b, self._L
-        phi = self._pphi
-        if self._mid:
-            c, s = math.cos(phi + 0.5 * dt * w), math.sin(phi + 0.5 * dt * w)
-        else:
-            c, s = math.cos(phi), math.sin(phi)
-        lx = a * s + b * c
-        ly = a * c - b * s
-        vx = v * c - w * lx
-        vy = v * s + w * ly
-        f0 = dt * (-v * s - w * ly)
-        f1 = dt * vx
-        self._px += dt * vx
-        self._py += dt * vy
-        phi += dt * w
-        if not -_PI < phi <= _PI:
-            phi = _PI - (_PI - phi) % _TWO_PI
-        self._pphi = phi
-        # B = d rate / d (v_c, alpha); noise N = k B Q_c B^T with k = dt * Delta.
-        tl = ta / L
-        b00, b01 = c - tl * lx, -dw * lx
-        b10, b11 = s + tl * ly, dw * ly
-        b20, b21 = tl, dw
-        k = dt * span
-        g00, g01 = b00 * q00 + b01 * q01, b00 * q01 + b01 * q11      # row 0 of B Q
-        g10, g11 = b10 * q00 + b11 * q01, b10 * q01 + b11 * q11
-        g20, g21 = b20 * q00 + b21 * q01, b20 * q01 + b21 * q11
+        ``u`` of :func:`~annslam_lib.models.motion.control_table`, process noise
+        dt * Delta B Q_c B^T (scalar code: the vehicle block only; the cross covariance
+        waits for :meth:`flush`). A step of dt <= 0 does nothing."""
+        if dt > 0.0:
+            self.predict_many(u, 0.0, (dt,), (u,), record=False)
+
+    def predict_many(self, u, t: float, times, rows, *, record: bool = True):
+        """Advance over a stretch of odometry samples in one call (the run loop's step
+        between two scans or fixes): holding control ``u`` from time ``t``, for each sample
+        k predict to ``times[k]`` (steps of dt <= 0 skipped), then hold ``rows[k]``.
+        ``u`` may be None (no control yet: nothing is predicted). Returns (u, t, n, poses):
+        the control held and the time reached after the last sample, the number of steps
+        taken and, with ``record``, the pose (t, x, y, phi) at every sample.
+
+        The scalar step (the fast copy of ``models.motion.predict`` and its noise; the
+        midpoint variant evaluates the rate at phi + dt w / 2) runs on local floats, and the
+        motion Jacobians compound into (f0, f1) for :meth:`flush`."""
+        a, b, L, mid = self._a, self._b, self._L, self._mid
+        px, py, phi = self._px, self._py, self._pphi
         p00, p01, p02, p11, p12, p22 = self._p
-        self._p = [p00 + 2.0 * f0 * p02 + f0 * f0 * p22 + k * (g00 * b00 + g01 * b01),
-                   p01 + f0 * p12 + f1 * p02 + f0 * f1 * p22 + k * (g00 * b10 + g01 * b11),
-                   p02 + f0 * p22 + k * (g00 * b20 + g01 * b21),
-                   p11 + 2.0 * f1 * p12 + f1 * f1 * p22 + k * (g10 * b10 + g11 * b11),
-                   p12 + f1 * p22 + k * (g10 * b20 + g11 * b21),
-                   p22 + k * (g20 * b20 + g21 * b21)]
-        self._f0 += f0
-        self._f1 += f1
-        self._dirty = True
+        F0, F1 = self._f0, self._f1
+        cos, sin = math.cos, math.sin
+        n = 0
+        poses = [] if record else None
+        for tk, row in zip(times, rows):
+            dt = tk - t
+            if dt > 0.0 and u is not None:
+                v, _, ta, w, dw, q00, q01, q11, span = u
+                if mid:
+                    c, s = cos(phi + 0.5 * dt * w), sin(phi + 0.5 * dt * w)
+                else:
+                    c, s = cos(phi), sin(phi)
+                lx = a * s + b * c
+                ly = a * c - b * s
+                vx = v * c - w * lx
+                f0 = dt * (-v * s - w * ly)
+                f1 = dt * vx
+                px += dt * vx
+                py += dt * (v * s + w * ly)
+                phi += dt * w
+                if not -_PI < phi <= _PI:
+                    phi = _PI - (_PI - phi) % _TWO_PI
+                # B = d rate / d (v_c, alpha); noise N = k B Q_c B^T with k = dt * Delta.
+                tl = ta / L
+                b00, b01 = c - tl * lx, -dw * lx
+                b10, b11 = s + tl * ly, dw * ly
+                k = dt * span
+                g00, g01 = b00 * q00 + b01 * q01, b00 * q01 + b01 * q11   # rows of B Q
+                g10, g11 = b10 * q00 + b11 * q01, b10 * q01 + b11 * q11
+                g20, g21 = tl * q00 + dw * q01, tl * q01 + dw * q11
+                p00, p01, p02, p11, p12, p22 = (
+                    p00 + 2.0 * f0 * p02 + f0 * f0 * p22 + k * (g00 * b00 + g01 * b01),
+                    p01 + f0 * p12 + f1 * p02 + f0 * f1 * p22 + k * (g00 * b10 + g01 * b11),
+                    p02 + f0 * p22 + k * (g00 * tl + g01 * dw),
+                    p11 + 2.0 * f1 * p12 + f1 * f1 * p22 + k * (g10 * b10 + g11 * b11),
+                    p12 + f1 * p22 + k * (g10 * tl + g11 * dw),
+                    p22 + k * (g20 * tl + g21 * dw))
+                F0 += f0
+                F1 += f1
+                n += 1
+            if record:
+                poses.append((tk, px, py, phi))
+            u, t = row, tk
+        if n:
+            self._px, self._py, self._pphi = px, py, phi
+            self._p = [p00, p01, p02, p11, p12, p22]
+            self._f0, self._f1 = F0, F1
+            self._dirty = True
+        return u, t, n, poses
 
     # ---- read access
     @property
@@ -175,6 +203,14 @@ class EkfSlam:
     @property
     def pose(self) -> np.ndarray:
         return np.array([self._px, self._py, self._pphi])
+
+    def pose_tuple(self) -> tuple[float, float, float]:
+        """The laser pose (x, y, phi) as floats (cheap: no array)."""
+        return self._px, self._py, self._pphi
+
+    def pose_cov_entries(self) -> tuple:
+        """The six unique entries (p00, p01, p02, p11, p12, p22) of the pose covariance."""
+        return tuple(self._p)
 
     @property
     def pose_cov(self) -> np.ndarray:
@@ -218,22 +254,39 @@ class EkfSlam:
         About fifty vector operations over the N landmarks instead of N small matrix
         products; the Jacobians are kept for an :meth:`update` from the same state."""
         self.flush()
-        P, N = self.P, self.n_landmarks
+        N = self.n_landmarks
         if N == 0:
             return np.empty((0, 2)), np.empty((0, 2, 2))
         d = self.x[3:].reshape(N, 2) - (self._px, self._py)
-        dx, dy = d[:, 0], d[:, 1]
+        return self._predicted(d[:, 0], d[:, 1], sigma_range, sigma_bearing)
+
+    def _predicted(self, dx, dy, sigma_range: float, sigma_bearing: float):
+        """zhat (N, 2) and S (N, 2, 2) of the landmarks at offsets (dx, dy) from the laser;
+        caches their Jacobians for :meth:`update`."""
+        r, bearing, a, b, c = self._model(dx, dy, sigma_range, sigma_bearing)
+        zhat = np.empty((r.size, 2))
+        zhat[:, 0] = r
+        zhat[:, 1] = bearing
+        S = np.empty((r.size, 2, 2))
+        S[:, 0, 0] = a
+        S[:, 0, 1] = S[:, 1, 0] = b
+        S[:, 1, 1] = c
+        return zhat, S
+
+    def _model(self, dx, dy, sigma_range: float, sigma_bearing: float):
+        """Predicted range and bearing of every landmark and the entries (S00, S01, S11)
+        of its innovation covariance (the closed form of :meth:`observation_model`); the
+        Jacobians are cached for an :meth:`update` from the same state."""
+        P = self.P
         q = dx * dx + dy * dy
-        if q.min() < 1e-18:
+        if q.size and q.min() < 1e-18:
             raise ValueError("a landmark coincides with the sensor position (range < 1e-9 m)")
         r = np.sqrt(q)
-        zhat = np.empty((N, 2))
-        zhat[:, 0] = r
-        zhat[:, 1] = wrap_difference(np.arctan2(dy, dx) + (_PI / 2 - self._pphi))
+        bearing = wrap_difference(np.arctan2(dy, dx) + (_PI / 2 - self._pphi))
         ir = 1.0 / r
         ux, uy = dx * ir, dy * ir
-        cx, cy, cphi = P[0, 3:], P[1, 3:], P[2, 3:]        # Cov(x | y | phi, landmarks)
         p00, p01, p02, p11, p12, p22 = self._p
+        cx, cy, cphi = P[0, 3:], P[1, 3:], P[2, 3:]        # Cov(x | y | phi, landmarks)
         ld = self._ld
         m00 = ld[0::2] - 2.0 * cx[0::2] + p00              # M = Cov(l - p)
         m01 = self._lo - cx[1::2] - cy[0::2] + p01
@@ -245,13 +298,33 @@ class EkfSlam:
         half_diff = 0.5 * (m11 - m00)
         half_tr = 0.5 * (m00 + m11)
         A = cos2 * half_diff - sin2 * m01
-        S = np.empty((N, 2, 2))
-        S[:, 0, 0] = half_tr - A + sigma_range**2
-        S[:, 0, 1] = S[:, 1, 0] = (sin2 * half_diff + cos2 * m01) * ir - (ux * v0 + uy * v1)
-        S[:, 1, 1] = ((half_tr + A) * ir - 2.0 * (ux * v1 - uy * v0)) * ir \
-            + (p22 + sigma_bearing**2)
-        self._om = (self._px, self._py, self._pphi, N, zhat, (ux, uy, -uy * ir, ux * ir))
-        return zhat, S
+        s00 = half_tr - A + sigma_range**2
+        s01 = (sin2 * half_diff + cos2 * m01) * ir - (ux * v0 + uy * v1)
+        s11 = ((half_tr + A) * ir - 2.0 * (ux * v1 - uy * v0)) * ir + (p22 + sigma_bearing**2)
+        self._om = [self._px, self._py, self._pphi, self.n_landmarks, (r, bearing),
+                    (ux, uy, -uy * ir, ux * ir)]
+        return r, bearing, s00, s01, s11
+
+    def innovation_d2(self, z, sigma_range: float, sigma_bearing: float) -> np.ndarray:
+        """Squared Mahalanobis distances d2 (n, N) of the detections z (n, 2) to every
+        landmark's predicted measurement: :meth:`observation_model` followed by
+        ``perception.association.mahalanobis_fast`` (the same formulas, to the bit), in one
+        pass without building zhat and S (the scan's gating is its costliest step after
+        the update)."""
+        self.flush()
+        N = self.n_landmarks
+        z = np.asarray(z, dtype=float)
+        if N == 0:
+            return np.empty((z.shape[0], 0))
+        d = self.x[3:].reshape(N, 2) - (self._px, self._py)
+        r, bearing, a, b, c = self._model(d[:, 0], d[:, 1], sigma_range, sigma_bearing)
+        det = a * c - b * b
+        if det.min() <= 0.0 or a.min() <= 0.0:
+            S = np.stack([np.stack([a, b], -1), np.stack([b, c], -1)], -2)
+            mahalanobis(z, np.column_stack([r, bearing]), S)    # raises, naming the landmark
+        nu_r = z[:, 0, None] - r
+        nu_b = wrap_difference(z[:, 1, None] - bearing)
+        return (c * nu_r * nu_r - 2.0 * b * nu_r * nu_b + a * nu_b * nu_b) / det
 
     def update(self, z, lm, sigma_range: float, sigma_bearing: float) -> tuple[float, int]:
         """One batch update with observations z (m, 2) of landmarks lm (m,) (indices;
@@ -273,8 +346,9 @@ class EkfSlam:
             cols += (3 + 2 * j, 4 + 2 * j)
         lm = np.array(lm_list)
         om = self._om
-        if om is not None and om[:4] == (self._px, self._py, self._pphi, self.n_landmarks):
-            zhat = om[4][lm]                               # from observation_model, same state
+        if om is not None and om[:4] == [self._px, self._py, self._pphi, self.n_landmarks]:
+            r, bearing = om[4]
+            zhat = np.column_stack([r[lm], bearing[lm]])   # from the gating, same state
             Hl = np.empty((m, 2, 2))
             for i, jac in enumerate(om[5]):
                 Hl[:, i // 2, i % 2] = jac[lm]

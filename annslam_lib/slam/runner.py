@@ -45,7 +45,8 @@ from ..data import filter_default_names
 from ..data.records import Dataset, Detections
 from ..evaluation.consistency import chi2_quantile
 from ..models.motion import control_table
-from ..perception.association import associate_fast, mahalanobis_fast
+from ..perception.association import associate_fast
+from .base import FilterBackend, LandmarkModel
 from .config import SlamConfig
 from .results import STATUS, ObservationLog, SlamResult, _landmark_history, _nis_arrays
 from .efficient import diag_blocks
@@ -97,14 +98,18 @@ def _initial(dataset: Dataset, cfg: SlamConfig) -> tuple[np.ndarray, dict]:
 
 
 
-def _event_table(odo_t, gps_t, scan_t):
-    ts = [gps_t, odo_t, scan_t]
-    t = np.concatenate(ts)
-    code = np.concatenate([np.full(x.size, c, dtype=np.int64) for x, c in zip(ts, (0, 1, 2))])
-    idx = np.concatenate([np.arange(x.size) for x in ts])
+def _events(odo_t, gps_t, scan_t):
+    """The GPS fixes (code 0) and scans (code 2) in time order (ties: GPS first, as in the
+    Car Park file's own event list), and for each the number of odometry samples that come
+    before it: those earlier, and at equal time those before a scan but after a fix."""
+    t = np.concatenate([gps_t, scan_t])
+    code = np.concatenate([np.zeros(gps_t.size, np.int64), np.full(scan_t.size, 2, np.int64)])
+    idx = np.concatenate([np.arange(gps_t.size), np.arange(scan_t.size)])
     order = np.lexsort((code, t))
-    return t[order].tolist(), code[order].tolist(), idx[order].tolist()
-
+    t, code, idx = t[order], code[order], idx[order]
+    k_end = np.where(code == 2, np.searchsorted(odo_t, t, side="right"),
+                     np.searchsorted(odo_t, t, side="left"))
+    return t.tolist(), code.tolist(), idx.tolist(), k_end.tolist()
 
 
 def _progress(progress, total):
@@ -165,6 +170,156 @@ def _landmark_model(cfg: SlamConfig, model):
 
 
 
+class LandmarkBook:
+    """Which landmarks the filter holds and what is known about each (the run loop's
+    book-keeping): ``uids`` in state order; per uid its creation time, its sightings, and
+    whether it is still tentative (``SlamConfig.landmark_min_observations`` sightings within
+    ``landmark_probation`` seconds, or it is marginalised out again); with known data
+    association, the simulator's landmark id of each."""
+
+    def __init__(self, min_observations: int, probation: float) -> None:
+        self.min_obs, self.probation = min_observations, probation
+        self.uids: list[int] = []
+        self.born: list[float] = []
+        self.seen: list[int] = []
+        self.tentative: set[int] = set()
+        self.by_true_id: dict[int, int] = {}
+        self.removed = 0
+
+    def __len__(self) -> int:
+        return len(self.uids)
+
+    def observed(self, state_indices) -> list[int]:
+        """Count one more sighting of the landmarks at these state indices; their uids."""
+        out = [self.uids[j] for j in state_indices]
+        for uid in out:
+            self.seen[uid] += 1
+        return out
+
+    def created(self, t: float, n: int, true_ids=None) -> list[int]:
+        """Register ``n`` landmarks just appended to the state; their uids."""
+        first = len(self.born)
+        new = list(range(first, first + n))
+        self.uids += new
+        self.born += [t] * n
+        self.seen += [1] * n
+        self.tentative.update(new)
+        if true_ids is not None:
+            self.by_true_id.update(zip(true_ids, new))
+        return new
+
+    def truth_assign(self, true_ids) -> list[int]:
+        """Known data association (simulator): the state index of each detection's true
+        landmark, NEW (-1) for the first sighting in a scan of an unmapped one, REJECTED
+        (-2) for a second one in the same scan."""
+        where = {u: j for j, u in enumerate(self.uids)}
+        first, out = set(), []
+        for tid in true_ids:
+            uid = self.by_true_id.get(tid)
+            if uid is not None and uid in where:
+                out.append(where[uid])
+            elif tid in first:
+                out.append(-2)
+            else:
+                first.add(tid)
+                out.append(-1)
+        return out
+
+    def prune(self, filt: FilterBackend, now: float, final: bool) -> None:
+        """Confirm the tentative landmarks seen often enough; marginalise out those whose
+        probation is over (all remaining ones when ``final``)."""
+        if not self.tentative:
+            return
+        drop = []
+        for uid in list(self.tentative):
+            if self.seen[uid] >= self.min_obs:
+                self.tentative.discard(uid)
+            elif final or now - self.born[uid] > self.probation:
+                drop.append(uid)
+                self.tentative.discard(uid)
+        if drop:
+            where = {u: j for j, u in enumerate(self.uids)}
+            filt.remove([where[u] for u in drop])
+            gone = set(drop)
+            self.uids = [u for u in self.uids if u not in gone]
+            self.removed += len(drop)
+
+
+class _Detections:
+    """The run's detections as the scan step uses them: each one's measurement, whether it
+    lies inside the range (and diameter) window, and what became of it."""
+
+    def __init__(self, det: Detections, cfg: SlamConfig) -> None:
+        self.det = det
+        self.z = np.column_stack([det.range, det.bearing])
+        inside = (det.range >= cfg.min_range) & (det.range <= cfg.max_range)
+        if cfg.min_diameter > 0:
+            inside &= ~(det.diameter < cfg.min_diameter)       # NaN (unknown) is kept
+        self.status = np.where(inside, STATUS["rejected"], STATUS["out_of_range"]).astype(np.int8)
+        self.uid = np.full(det.count, -1, dtype=np.int64)
+        self.win = np.flatnonzero(inside)               # per scan: win[off[k]:off[k + 1]]
+        self.off = np.searchsorted(self.win, det.offsets).tolist()
+
+    def of_scan(self, k: int):
+        a, b = self.off[k], self.off[k + 1]
+        return self.win[a:b] if b > a else None
+
+
+class _ScanStep:
+    """One laser scan, after the prediction to its time: gate and associate every detection
+    at once, one batch update with the associated ones, the new landmarks, the tentative
+    rule. Holds what does not change from scan to scan."""
+
+    def __init__(self, filt: FilterBackend, book: LandmarkBook, dets: _Detections,
+                 cfg: SlamConfig, lmodel: LandmarkModel | None, sr: float, sb: float) -> None:
+        self.filt, self.book, self.dets, self.lmodel = filt, book, dets, lmodel
+        self.sr, self.sb = sr, sb
+        self.gate = chi2_quantile(cfg.gate_prob, 2)
+        self.new_thr = chi2_quantile(cfg.new_landmark_prob, 2)
+        self.truth = cfg.association == "truth"
+
+    def __call__(self, k: int, t: float, prior: tuple) -> tuple[float, int] | None:
+        """Process scan ``k`` at time ``t`` seen from the predicted pose ``prior``; the
+        (NIS, dof) of its update, or None without one."""
+        use = self.dets.of_scan(k)
+        if use is None:
+            self.book.prune(self.filt, t, False)
+            return None
+        d, filt, book = self.dets, self.filt, self.book
+        use_l = use.tolist()
+        z = d.z[use]
+        if self.lmodel is not None:            # z' = h(prior, l_ann) REPLACES z, never both
+            z = np.asarray(self.lmodel.pseudo_measurement(
+                np.array(prior), z, d.det.intensity[use], d.det.diameter[use]), dtype=float)
+            if z.shape != (use.size, 2) or not np.all(np.isfinite(z)) or np.any(z[:, 0] <= 0):
+                raise ValueError(f"landmark_model returned invalid pseudo-measurements for "
+                                 f"scan {k}: need finite ({use.size}, 2) with range > 0")
+        if self.truth:
+            assign = book.truth_assign(d.det.landmark_id[use].tolist())
+        elif len(book):
+            assign = associate_fast(filt.innovation_d2(z, self.sr, self.sb), self.gate,
+                                    self.new_thr).tolist()
+        else:
+            assign = [-1] * len(use_l)
+        result = None
+        old = [i for i, j in enumerate(assign) if j >= 0]
+        if old:
+            lm = [assign[i] for i in old]
+            result = filt.update(z[old], lm, self.sr, self.sb)
+            for i, uid in zip(old, book.observed(lm)):
+                d.status[use_l[i]] = STATUS["associated"]
+                d.uid[use_l[i]] = uid
+        new = [i for i, j in enumerate(assign) if j == -1]
+        if new:
+            filt.augment(z[new], self.sr, self.sb)
+            ids = [int(d.det.landmark_id[use_l[i]]) for i in new] if self.truth else None
+            for i, uid in zip(new, book.created(t, len(new), ids)):
+                d.status[use_l[i]] = STATUS["new"]
+                d.uid[use_l[i]] = uid
+        book.prune(filt, t, False)
+        return result
+
+
 def _run(dataset, config, progress, backend, landmark_model=None) -> SlamResult:
     t_start = time.perf_counter()
     ds = _resolve_dataset(dataset)
@@ -190,95 +345,55 @@ def _run(dataset, config, progress, backend, landmark_model=None) -> SlamResult:
     P0 = np.diag([cfg.initial_sigma_xy**2, cfg.initial_sigma_xy**2, cfg.initial_sigma_phi**2])
     filt = make(pose0, P0, ds.vehicle, cfg.motion_model)
     controls = control_table(odo, ds.vehicle, cfg.sigma_speed, cfg.sigma_steer)
-
-    sr, sb = cfg.sigma_range, cfg.sigma_bearing
     lmodel = _landmark_model(cfg, landmark_model)
+    sr, sb = cfg.sigma_range, cfg.sigma_bearing
     if lmodel is not None:                     # the model's pseudo-measurement noise R'
         sr, sb = (float(s) for s in lmodel.sigmas)
-    gate = chi2_quantile(cfg.gate_prob, 2)
-    new_thr = chi2_quantile(cfg.new_landmark_prob, 2)
     gps_gate = math.inf if cfg.gps_gate_prob >= 1.0 else chi2_quantile(cfg.gps_gate_prob, 2)
     t0 = float(odo.t[0])
     gps_until = {"none": -math.inf, "init": t0 + cfg.gps_init_seconds, "all": math.inf}[cfg.gps_mode]
     gps_xy = ds.gps.xy
 
-    ev_t, ev_code, ev_idx = _event_table(odo.t, ds.gps.t, det.t)
+    dets = _Detections(det, cfg)
+    book = LandmarkBook(cfg.landmark_min_observations, cfg.landmark_probation)
+    scan_step = _ScanStep(filt, book, dets, cfg, lmodel, sr, sb)
     n_scans = len(det)
     traj_rows: list[tuple] = []            # pose after each processed scan
-    cov_rows: list[list] = []              # its covariance (6 unique entries)
+    cov_rows: list[tuple] = []             # its covariance (6 unique entries)
     scans_done: list[int] = []
     pose_prior = np.full((n_scans, 3), np.nan)
-    odo_traj = np.full((len(odo), 4), np.nan)
+    odo_rows: list[tuple] = []             # the filtered pose at every odometry sample
     nis_rows = []                          # (t, scan, kind, nis, dof, accepted)
     health_rows = []
     counts = dict(predicts=0, scans=0, scans_skipped=0, gps_updates=0, gps_rejected=0,
                   gps_skipped=0, updates=0, observations=0, associated=0, new=0, rejected=0,
                   out_of_range=0, landmarks_created=0, landmarks_removed=0)
-    # Per detection: measurement, whether it is inside the range window, and what became of it.
-    z_det = np.column_stack([det.range, det.bearing])
-    in_window = (det.range >= cfg.min_range) & (det.range <= cfg.max_range)
-    if cfg.min_diameter > 0:
-        in_window &= ~(det.diameter < cfg.min_diameter)          # NaN (unknown) is kept
-    status = np.where(in_window, STATUS["rejected"], STATUS["out_of_range"]).astype(np.int8)
-    det_uid = np.full(det.count, -1, dtype=np.int64)
-    win = np.flatnonzero(in_window)                        # per scan: win[win_off[k]:win_off[k+1]]
-    win_off = np.searchsorted(win, det.offsets).tolist()
-    ASSOCIATED, NEW = STATUS["associated"], STATUS["new"]
-    # Landmarks: ``uids`` in state order; creation time and sightings indexed by uid.
-    uids: list[int] = []
-    born: list[float] = []
-    seen: list[int] = []
-    tentative: set[int] = set()
-    truth_to_uid: dict[int, int] = {}
-    min_obs, probation = cfg.landmark_min_observations, cfg.landmark_probation
-    bar = _progress(progress, len(ev_t))
-
-    def prune(now: float, final: bool) -> None:
-        drop = []
-        for uid in list(tentative):
-            if seen[uid] >= min_obs:
-                tentative.discard(uid)
-            elif final or now - born[uid] > probation:
-                drop.append(uid)
-                tentative.discard(uid)
-        if drop:
-            where = {u_: j for j, u_ in enumerate(uids)}
-            filt.remove([where[u_] for u_ in drop])
-            gone = set(drop)
-            uids[:] = [u_ for u_ in uids if u_ not in gone]
-            counts["landmarks_removed"] += len(drop)
 
     def checkpoint(scan: int, t: float) -> None:
         lo, asym = filt.health()
-        health_rows.append((scan, t, filt.x.size, lo, asym))
+        health_rows.append((scan, t, filt.state()[0].size, lo, asym))
 
-    cur_t = t0
-    u = None
-    predict = filt.predict
-    truth = cfg.association == "truth"
-    n_ev = len(ev_t)
-    for i_ev in range(n_ev):
-        t, code, idx = ev_t[i_ev], ev_code[i_ev], ev_idx[i_ev]
-        if bar is not None and i_ev % 2000 == 0:
-            bar.update(min(2000, n_ev - i_ev))
-        if code == 1:                                          # odometry: new held control
-            if t < t0:
-                continue
-            if t > cur_t:
-                predict(u, t - cur_t)
-                counts["predicts"] += 1
-                cur_t = t
-            u = controls[idx]
-            odo_traj[idx] = (t, filt._px, filt._py, filt._pphi)
-            continue
-        if t < t0 or u is None:                                # before the first odometry
+    ev_t, ev_code, ev_idx, ev_k = _events(odo.t, ds.gps.t, det.t)
+    odo_t = odo.t.tolist()
+    bar = _progress(progress, len(odo_t) + len(ev_t))
+    cur_t, u, k_done = t0, None, 0
+    for t, code, idx, k_end in zip(ev_t, ev_code, ev_idx, ev_k):
+        if k_end > k_done:                 # the odometry samples before this event
+            u, cur_t, n, poses = filt.predict_many(u, cur_t, odo_t[k_done:k_end],
+                                                   controls[k_done:k_end])
+            counts["predicts"] += n
+            odo_rows += poses
+            if bar is not None:
+                bar.update(k_end - k_done)
+            k_done = k_end
+        if t < t0 or u is None:            # before the first odometry sample
             counts["scans_skipped" if code == 2 else "gps_skipped"] += 1
             continue
         if t > cur_t:
-            predict(u, t - cur_t)
+            filt.predict(u, t - cur_t)
             counts["predicts"] += 1
             cur_t = t
-        if code == 0:                                          # GPS fix
+        if code == 0:                      # GPS fix
             if t > gps_until:
                 counts["gps_skipped"] += 1
                 continue
@@ -286,72 +401,37 @@ def _run(dataset, config, progress, backend, landmark_model=None) -> SlamResult:
             nis_rows.append((t, -1, 1, nis, 2, ok))
             counts["gps_updates" if ok else "gps_rejected"] += 1
             continue
-        # ---- laser scan idx
-        counts["scans"] += 1
-        pose_prior[idx] = (filt._px, filt._py, filt._pphi)
+        counts["scans"] += 1               # laser scan idx
+        prior = filt.pose_tuple()
+        pose_prior[idx] = prior
         scans_done.append(idx)
-        a_, b_ = win_off[idx], win_off[idx + 1]
-        if b_ > a_:
-            use = win[a_:b_]
-            use_l = use.tolist()
-            z = z_det[use]
-            if lmodel is not None:             # z' = h(prior, l_ann) REPLACES z, never both
-                z = np.asarray(lmodel.pseudo_measurement(
-                    pose_prior[idx], z, det.intensity[use], det.diameter[use]), dtype=float)
-                if z.shape != (use.size, 2) or not np.all(np.isfinite(z)) or np.any(z[:, 0] <= 0):
-                    raise ValueError(f"landmark_model returned invalid pseudo-measurements for "
-                                     f"scan {idx}: need finite ({use.size}, 2) with range > 0")
-            if truth:
-                where = {u_: j for j, u_ in enumerate(uids)}
-                first = set()
-                assign = []
-                for tid in det.landmark_id[use].tolist():
-                    if tid in truth_to_uid and truth_to_uid[tid] in where:
-                        assign.append(where[truth_to_uid[tid]])
-                    elif tid in first:     # seen twice in one scan before it exists: once
-                        assign.append(-2)
-                    else:
-                        first.add(tid)
-                        assign.append(-1)
-            elif uids:
-                zhat, S = filt.observation_model(sr, sb)
-                assign = associate_fast(mahalanobis_fast(z, zhat, S), gate, new_thr).tolist()
-            else:
-                assign = [-1] * len(use_l)
-            old = [i for i, j in enumerate(assign) if j >= 0]
-            if old:
-                lm = [assign[i] for i in old]
-                nis, dof = filt.update(z[old], lm, sr, sb)
-                nis_rows.append((t, idx, 0, nis, dof, True))
-                counts["updates"] += 1
-                for i, j in zip(old, lm):
-                    uid = uids[j]
-                    seen[uid] += 1
-                    status[use_l[i]] = ASSOCIATED
-                    det_uid[use_l[i]] = uid
-            new = [i for i, j in enumerate(assign) if j == -1]
-            if new:
-                filt.augment(z[new], sr, sb)
-                for i in new:
-                    uid = len(born)
-                    uids.append(uid)
-                    born.append(t)
-                    seen.append(1)
-                    tentative.add(uid)
-                    status[use_l[i]] = NEW
-                    det_uid[use_l[i]] = uid
-                    if truth:
-                        truth_to_uid[int(det.landmark_id[use_l[i]])] = uid
-        if tentative:
-            prune(t, False)
-        traj_rows.append((t, filt._px, filt._py, filt._pphi))
-        cov_rows.append(filt._p)
+        out = scan_step(idx, t, prior)
+        if out is not None:
+            nis_rows.append((t, idx, 0, out[0], out[1], True))
+            counts["updates"] += 1
+        traj_rows.append((t, *filt.pose_tuple()))
+        cov_rows.append(filt.pose_cov_entries())
         if counts["scans"] % cfg.checkpoint_every == 0:
             checkpoint(idx, t)
+    if k_done < len(odo_t):                # odometry after the last event
+        u, cur_t, n, poses = filt.predict_many(u, cur_t, odo_t[k_done:], controls[k_done:])
+        counts["predicts"] += n
+        odo_rows += poses
     if bar is not None:
         bar.close()
-    prune(cur_t, True)
+    book.prune(filt, cur_t, True)
     checkpoint(scans_done[-1] if scans_done else -1, cur_t)
+    counts["landmarks_removed"] = book.removed
+    return _assemble(filt, book, dets, cfg, counts, traj_rows, cov_rows, scans_done, pose_prior,
+                     odo_rows, nis_rows, health_rows, pose0, init_info, t_start)
+
+
+def _assemble(filt, book, dets, cfg, counts, traj_rows, cov_rows, scans_done, pose_prior,
+              odo_rows, nis_rows, health_rows, pose0, init_info, t_start) -> SlamResult:
+    """The :class:`SlamResult` of a finished run: arrays from the rows collected, the
+    per-detection log, the landmarks' histories."""
+    det = dets.det
+    n_scans = len(det)
     n_traj = len(traj_rows)
     traj = np.array(traj_rows, dtype=float).reshape(n_traj, 4)
     traj_scan = np.array(scans_done, dtype=np.int64)
@@ -359,20 +439,17 @@ def _run(dataset, config, progress, backend, landmark_model=None) -> SlamResult:
     traj_cov = c6[:, [0, 1, 2, 1, 3, 4, 2, 4, 5]].reshape(n_traj, 3, 3)
     processed = np.zeros(det.count, dtype=bool)
     processed[np.isin(np.repeat(np.arange(n_scans), np.diff(det.offsets)), traj_scan)] = True
-
     x, P = filt.state()
     x, P = x.copy(), P.copy()
-    M = len(uids)
-    lut = np.full(len(born) + 1, -1, dtype=np.int64)      # uid -> final landmark index
-    lut[uids] = np.arange(M)
-    det_landmark = np.where(det_uid >= 0, lut[det_uid], -1)
-    st = status[processed]
+    M = len(book)
+    lut = np.full(len(book.born) + 1, -1, dtype=np.int64)  # uid -> final landmark index
+    lut[book.uids] = np.arange(M)
+    det_landmark = np.where(dets.uid >= 0, lut[dets.uid], -1)
+    st = dets.status[processed]
     counts["observations"] = int(processed.sum())
-    counts["associated"] = int(np.sum(st == STATUS["associated"]))
-    counts["new"] = int(np.sum(st == STATUS["new"]))
-    counts["rejected"] = int(np.sum(st == STATUS["rejected"]))
-    counts["out_of_range"] = int(np.sum(st == STATUS["out_of_range"]))
-    counts["landmarks_created"] = len(born)
+    for key in ("associated", "new", "rejected", "out_of_range"):
+        counts[key] = int(np.sum(st == STATUS[key]))
+    counts["landmarks_created"] = len(book.born)
     counts["landmarks"] = M
     scan_of = np.repeat(np.arange(n_scans), np.diff(det.offsets))
     post = np.full((n_scans, 3), np.nan)
@@ -381,18 +458,17 @@ def _run(dataset, config, progress, backend, landmark_model=None) -> SlamResult:
     log = ObservationLog(scan=scan_of[rows], t=det.t[scan_of[rows]], range=det.range[rows].copy(),
                          bearing=det.bearing[rows].copy(), intensity=det.intensity[rows].copy(),
                          diameter=det.diameter[rows].copy(), true_id=det.landmark_id[rows].copy(),
-                         status=status[rows], landmark=det_landmark[rows],
+                         status=dets.status[rows], landmark=det_landmark[rows],
                          pose_prior=pose_prior[scan_of[rows]], pose=post[scan_of[rows]])
     lm_obs, lm_true = _landmark_history(log, M)
-    nis = _nis_arrays(nis_rows)
     health = {k: np.array([r[i] for r in health_rows]) for i, k in
               enumerate(("scan", "t", "n", "min_eig", "asymmetry"))}
+    odo_traj = np.array(odo_rows, dtype=float).reshape(len(odo_rows), 4)
     return SlamResult(
-        trajectory=traj[:n_traj].copy(), scan_index=traj_scan[:n_traj].copy(),
-        pose_cov=traj_cov[:n_traj].copy(),
-        odometry_trajectory=odo_traj[np.isfinite(odo_traj[:, 0])],
+        trajectory=traj, scan_index=traj_scan, pose_cov=traj_cov,
+        odometry_trajectory=odo_traj,
         landmarks=x[3:].reshape(-1, 2).copy(), landmark_cov=diag_blocks(P).copy(),
-        landmark_observations=lm_obs, landmark_true_id=lm_true, nis=nis, counts=counts,
-        health=health, state=x, covariance=P, observations=log,
+        landmark_observations=lm_obs, landmark_true_id=lm_true, nis=_nis_arrays(nis_rows),
+        counts=counts, health=health, state=x, covariance=P, observations=log,
         runtime=time.perf_counter() - t_start, config=cfg, initial_pose=pose0,
         initial_info=init_info)
