@@ -437,3 +437,40 @@ def test_zero_output_starts_from_the_inverse_model(sim):
     assert m.epochs == 0 and m.best_epoch == 0
     np.testing.assert_allclose(m.correction(ts.X), np.broadcast_to(ts.Y[sp.train].mean(0), ts.Y.shape),
                                rtol=0, atol=1e-15)
+
+
+def test_first_deterministic_training_does_not_load_dynamo(sim):
+    # torch.use_deterministic_algorithms imports torch._inductor (and _dynamo, 1.2 s on its
+    # first call here); the course sets the eager flag alone. In a fresh interpreter: the
+    # flag is on inside training, dynamo never loads, and the weights equal this process's.
+    import subprocess
+    import sys
+    _, _, ts = sim
+    code = (
+        "import sys, numpy as np, torch\n"
+        "from annslam_lib import ann\n"
+        "from annslam_lib.ann import network\n"
+        "from annslam_lib.data import simulate\n"
+        "from annslam_lib.slam import config, runner\n"
+        "seen = []\n"
+        "orig = network._forward\n"
+        "def spy(*a):\n"
+        "    seen.append(torch.are_deterministic_algorithms_enabled())\n"
+        "    return orig(*a)\n"
+        "network._forward = spy\n"
+        "ds = simulate.simulate(range_bias=0.0)\n"
+        "res = runner.run(ds, config.SlamConfig.for_dataset('simulated'))\n"
+        "ts = ann.training_set(res, ds)\n"
+        "m = ann.train(ts, ann.chronological_split(ts), ann.TrainConfig(seed=3))\n"
+        "np.save(sys.argv[1], m.theta)\n"
+        "print(all(seen), len(seen) > 0, torch.are_deterministic_algorithms_enabled(),\n"
+        "      'torch._dynamo' in sys.modules)\n")
+    import tempfile
+    with tempfile.TemporaryDirectory() as tmp:
+        out = subprocess.run([sys.executable, "-c", code, f"{tmp}/theta.npy"],
+                             capture_output=True, text=True, timeout=300)
+        assert out.returncode == 0, out.stderr[-2000:]
+        assert out.stdout.split() == ["True", "True", "False", "False"]
+        theta = np.load(f"{tmp}/theta.npy")
+    mine = ann.train(ts, ann.chronological_split(ts), ann.TrainConfig(seed=3))
+    np.testing.assert_array_equal(theta, mine.theta)

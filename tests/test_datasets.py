@@ -1,6 +1,5 @@
 """Loaders of the real runs: counts, units and the time base against PROVENANCE.md,
 the event order against the Car Park file's own event list, and damaged files."""
-import time
 from collections import Counter
 
 import numpy as np
@@ -133,14 +132,14 @@ def test_durations(car_park, victoria_park):
     assert odo[-1] - odo[0] == pytest.approx(1548.6, abs=1e-6)
 
 
-def test_loading_is_cached_read_only_and_fast(car_park, victoria_park):
+def test_loading_is_cached_and_read_only(car_park, victoria_park):
+    # (parse times are in benchmarks/bench_course.py)
     assert loaders.load("car_park") is car_park and loaders.load_victoria_park() is victoria_park
     with pytest.raises(ValueError, match="read-only"):
         car_park.odometry.speed[0] = 1.0
     for parse, ds in ((_parse_car_park, car_park), (_parse_victoria_park, victoria_park)):
-        start = time.perf_counter()
-        parse(fetch.dataset_dir(ds.name))
-        assert time.perf_counter() - start < 1.0
+        again = parse(fetch.dataset_dir(ds.name))
+        assert np.array_equal(again.odometry.t, ds.odometry.t)
 
 
 # ---------------------------------------------------------------- errors

@@ -1,7 +1,6 @@
 """Checks of notebook 07's graded exercises (annslam_lib.grading.ann): the references are the
 library's, the notebook's solutions pass, the paper's printed neuron and the usual slips fail
 with their own messages, and the stubs say 'not written yet'."""
-import time
 
 import numpy as np
 import pytest
@@ -199,11 +198,9 @@ def mse_loss_loop(net, X, Y, optimizer, epochs):
     return out
 
 
-def test_train_loop_solutions_pass_fast_and_leave_threads_alone():
+def test_train_loop_solutions_pass_and_leave_threads_alone():
     threads = torch.get_num_threads()
-    t0 = time.perf_counter()
     assert gk.check_train_loop(notebook_train_loop, quiet=True).startswith("✓ my_train_loop")
-    assert time.perf_counter() - t0 < 5.0
     gk.check_train_loop(mse_loss_loop, seed=3, quiet=True)
     gk.check_train_loop(gk.reference_train_loop, quiet=True)
     assert torch.get_num_threads() == threads

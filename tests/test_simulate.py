@@ -3,7 +3,6 @@ noise statistics, and consistency with the kinematics and observation models."""
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 import pytest
@@ -340,11 +339,8 @@ def test_bad_beacons_and_config_type():
         simulate({"seed": 1})
 
 
-def test_dataset_shape_and_speed():
-    start = time.perf_counter()
-    ds = simulate()
-    elapsed = time.perf_counter() - start
-    assert elapsed < 2.0                      # typically ~0.15 s
+def test_dataset_shape():
+    ds = simulate()                           # (its time is in benchmarks/bench_course.py)
     assert ds.name == "simulated" and ds.landmark_kind == "beacons"
     assert ds.truth.poses.shape == (len(ds.odometry), 4)
     assert np.array_equal(ds.truth.landmarks, ds.beacons) and ds.beacons.shape == (15, 2)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import contextlib
 import math
 import numbers
+import sys
 import time
 from dataclasses import dataclass, field, replace
 
@@ -118,12 +119,25 @@ def _deterministic():
     _need_torch()
     threads, det = torch.get_num_threads(), torch.are_deterministic_algorithms_enabled()
     torch.set_num_threads(1)
-    torch.use_deterministic_algorithms(True)
+    _set_deterministic(True)
     try:
         yield
     finally:
-        torch.use_deterministic_algorithms(det)
+        _set_deterministic(det)
         torch.set_num_threads(threads)
+
+
+def _set_deterministic(mode: bool) -> None:
+    """``torch.use_deterministic_algorithms(mode)`` without its import of
+    ``torch._inductor.config``, which loads torch._dynamo (1.2 s on the first call, more
+    than the training it guards). The course never compiles, so only the eager flag
+    matters; where inductor is already loaded, or the private setter is gone in another
+    torch, the public call is made."""
+    setter = getattr(torch._C, "_set_deterministic_algorithms", None)
+    if setter is None or "torch._inductor.config" in sys.modules:
+        torch.use_deterministic_algorithms(mode)
+    else:
+        setter(mode, warn_only=False)
 
 
 

@@ -10,3 +10,5 @@ Each explorer is built from a pure function (testable without a browser) and a d
 callback; the widget keeps its latest result in ``widget.holder["summary"]`` so a headless
 test can move a slider and check what a student would see.
 """
+
+__all__ = ["ch00_course_map", "ch01_kinematics", "ch02_laser_offset", "ch03_observation", "ch04_landmarks", "ch05_ekf_slam", "ch06_victoria_park", "ch07_ann_training", "ch08_verdict"]

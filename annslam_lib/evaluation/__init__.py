@@ -6,3 +6,5 @@
 - ``summary``: ``run_metrics``, the one summary of a run every table uses
 - ``timing``: per-step cost of the efficient and dense filters
 """
+
+__all__ = ["trajectory", "map", "consistency", "summary", "timing"]

@@ -11,3 +11,5 @@
 
 Changing the sensor model: ``observation`` (its fast copies are listed in its docstring).
 """
+
+__all__ = ["geometry", "vehicle", "motion", "observation", "uncertainty"]

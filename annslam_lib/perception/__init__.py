@@ -5,3 +5,5 @@
 - ``sources``: which detections a run's filter uses, with their noise
 - ``association``: chi-square gating and nearest neighbour (and the filter's fast copies)
 """
+
+__all__ = ["beacons", "trees", "sources", "association"]

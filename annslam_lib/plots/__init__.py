@@ -6,3 +6,5 @@
 - ``ann``: the network's figures (the paper's Figures 6-8)
 - ``paper``: the verdict's figures
 """
+
+__all__ = ["style", "data", "slam", "ann", "paper"]

@@ -55,9 +55,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.linalg import eigh
-from scipy.linalg.blas import dsyrk, dtrsm
-from scipy.linalg.lapack import dpotrf, dtrtrs
 
 from ..models.geometry import wrap_angle, wrap_difference
 from ..models.observation import inverse_observe, observe_fast
@@ -68,6 +65,18 @@ from .base import InnovationError, check_initial
 __all__ = ["EkfSlam", "diag_blocks"]
 
 _PI, _TWO_PI = math.pi, 2.0 * math.pi
+
+# scipy.linalg (0.18 s to import) is bound on the first filter's construction, so that
+# importing the run loop or a chapter that never filters does not pay for it.
+eigh = dsyrk = dtrsm = dpotrf = dtrtrs = None
+
+
+def _load_linalg() -> None:
+    global eigh, dsyrk, dtrsm, dpotrf, dtrtrs
+    if dsyrk is None:
+        from scipy.linalg import eigh
+        from scipy.linalg.blas import dsyrk, dtrsm
+        from scipy.linalg.lapack import dpotrf, dtrtrs
 
 
 class EkfSlam:
@@ -84,6 +93,7 @@ class EkfSlam:
 
     def __init__(self, x0, P0, vehicle: Vehicle, motion_model: str = "euler") -> None:
         x0, P0 = check_initial(x0, P0, vehicle, motion_model)
+        _load_linalg()
         self._mid = motion_model == "midpoint"
         self.vehicle = vehicle
         self._a, self._b, self._L = vehicle.a, vehicle.b, vehicle.L
