@@ -66,6 +66,28 @@ def test_student_version_stubs_solutions_like_nbgrader_and_drops_hidden_tests():
         ("ex-a-tests", 2.0, 3), ("ex-b-tests", 1.0, 5)]
 
 
+def _answer(src, gid="think-a"):
+    c = new_markdown_cell(src)
+    c.metadata["nbgrader"] = {"grade": False, "grade_id": gid, "locked": False,
+                              "schema_version": 3, "solution": True, "task": False}
+    return c
+
+
+def test_written_answers_and_top_level_code_exercises_are_stubbed_and_run_all_goes_on(tmp_path):
+    nb = _toy()
+    nb.cells += [_answer("**Solution.** Because the gate is a chi-square quantile."),
+                 _sol("### BEGIN SOLUTION\nanswer = 42\n### END SOLUTION", "ex-c"),
+                 new_code_cell("print('after')")]
+    st = release.student_version(nb, "toy")
+    assert st.cells[7].source == "YOUR ANSWER HERE"            # nbgrader's text stub, whole cell
+    assert st.cells[8].source == "# YOUR CODE HERE\nraise NotImplementedError()"
+    assert "raises-exception" in st.cells[8].metadata["tags"]
+    assert "tags" not in st.cells[2].metadata                  # a def stub does not raise
+    from nbclient import NotebookClient
+    NotebookClient(st, timeout=60, kernel_name="python3", allow_errors=False).execute()
+    assert st.cells[9].outputs[0]["text"] == "after\n"
+
+
 @pytest.mark.parametrize("mutate, message", [
     (lambda nb: nb.cells[5].metadata["nbgrader"].update(grade_id="ex-a-tests"), "already used"),
     (lambda nb: nb.cells[5].metadata["nbgrader"].update(points=0), "needs points > 0"),
@@ -154,6 +176,9 @@ def test_student_version_holds_no_solution_code_no_hidden_tests_no_outputs(path,
     lines = {s.strip() for s in text.split("\n")}
     leaked = (release.solution_lines(inst) | release.hidden_test_lines(inst)) & lines
     assert not leaked, f"solution or hidden-test code in the student {path.name}: {leaked}"
+    for a, b in zip(inst.cells, st.cells):                     # written answers: whole cells
+        if a.metadata.get("nbgrader", {}).get("solution") and "BEGIN SOLUTION" not in a.source:
+            assert b.source == release.TEXT_STUB and a.source not in text
     assert all(not c.get("outputs") for c in st.cells if c.cell_type == "code")
     n_stubs = text.count("raise NotImplementedError()")
     n_solutions = sum(1 for c in inst.cells for line in c.source.split("\n")

@@ -16,12 +16,14 @@ from ipywidgets import FloatSlider, interactive
 from ..models.motion import axle_pose, predict, predict_exact
 from ..evaluation.trajectory import TrajectoryErrors
 from ..plots.data import car_outline
-from ..plots.style import show_widget_figure, widget_figure
 from ..models.vehicle import ACFR_UTE, Vehicle
+from ..plots.style import FIG_WIDTH, figure, show_widget_figure, widget_figure
 from ..plots.style import notebook_setup as setup
 
 __all__ = ["setup", "circumradius", "arc_vs_euler", "plot_arc_vs_euler", "kinematics_explorer",
-           "plot_turning_geometry", "plot_paths", "plot_errors"]
+           "plot_turning_geometry", "plot_paths", "plot_errors", "turning_geometry_figure",
+           "euler_error_figure", "dead_reckoning_figure", "heading_sensitivity_figure",
+           "heading_drift_figure"]
 
 
 def circumradius(p1, p2, p3) -> float:
@@ -188,3 +190,94 @@ def plot_errors(errors: dict[str, TrajectoryErrors], ax=None, *, title: str = ""
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8, loc="best")
     return ax
+
+
+def turning_geometry_figure(vehicle: Vehicle = ACFR_UTE, steering: float = 0.35):
+    """The turning circle at ``steering`` (left) and, for every steering angle of the car,
+    the radii of the circles its axle centre, encoder wheel and laser run on (right)."""
+    fig, (ax0, ax1) = figure(1, 2, height=5.5, width_ratios=[1, 1.1])
+    plot_turning_geometry(vehicle, steering, ax=ax0)
+    alpha = np.linspace(0.05, 0.6, 200)
+    R = vehicle.L / np.tan(alpha)
+    for label, r, color in (("C (axle centre): R", R, "tab:blue"),
+                            ("encoder wheel: R - H", R - vehicle.H, "tab:green"),
+                            ("laser", np.hypot(vehicle.a, R - vehicle.b), "tab:red")):
+        ax1.semilogy(alpha, r, color=color, label=label)
+    ax1.axvline(steering, color="0.5", ls=":", label=f"the drawing, {steering:.2f} rad")
+    ax1.set(xlabel="steering alpha [rad] (left turn)", ylabel="radius [m]",
+            title="every point of the car on its own circle")
+    ax1.grid(True, which="both", alpha=0.3)
+    ax1.legend(loc="upper right")
+    return fig
+
+
+def euler_error_figure(dts, local, horizon_error, *, speed: float = 2.0, steering: float = 0.3,
+                       vehicle: Vehicle = ACFR_UTE, horizon: float = 4.0):
+    """Euler against the exact arc: the laser position error of one step and after
+    ``horizon`` seconds against the step (left, log-log with fitted slopes over the
+    smaller half of the steps), and the two paths at dt = 0.2 s (right)."""
+    dts, local, horizon_error = (np.asarray(v, dtype=float) for v in (dts, local, horizon_error))
+    half = slice(0, max(2, dts.size // 2))
+    fig, (ax0, ax1) = figure(1, 2, height=4.8, width_ratios=[1.2, 1])
+    for err, style, what in ((local, "o-", "one step (local)"),
+                             (horizon_error, "s-", f"after {horizon:g} s (global)")):
+        slope = np.polyfit(np.log(dts[half]), np.log(err[half]), 1)[0]
+        ax0.loglog(dts, err, style, ms=3, label=f"{what}, slope {slope:.2f}")
+    for d, lab in ((0.025, "odometry 25 ms"), (0.2, "0.2 s")):
+        ax0.axvline(d, color="0.6", ls=":")
+        ax0.annotate(lab, (d, float(np.min(local))), rotation=90, fontsize=8, xytext=(3, 0),
+                     textcoords="offset points")
+    ax0.set(xlabel="dt [s]", ylabel="laser position error [m]",
+            title=f"Euler vs exact arc, {speed:g} m/s, steering {steering:g} rad")
+    ax0.grid(True, which="both", alpha=0.3)
+    ax0.legend(loc="lower right")
+    s = arc_vs_euler(speed, steering, 0.2, vehicle, horizon=horizon)
+    plot_arc_vs_euler(s, ax1)
+    ax1.set_title(f"the paths at dt = 0.2 s over {horizon:g} s")
+    ax1.legend(loc="upper center", bbox_to_anchor=(0.5, -0.15), ncol=2, fontsize=8)
+    return fig
+
+
+def dead_reckoning_figure(gps, paths: dict, errors: dict, *, limits=None, title: str = ""):
+    """Dead-reckoned paths against GPS, one map per {label: trajectory} (top), and their
+    position errors against GPS over time (bottom, {label: TrajectoryErrors})."""
+    n = len(paths)
+    fig = plt.figure(figsize=(FIG_WIDTH, 8.5))
+    gs = fig.add_gridspec(2, n, height_ratios=[1.7, 1])
+    for j, (label, traj) in enumerate(paths.items()):
+        ax = fig.add_subplot(gs[0, j])
+        plot_paths(gps, {label: traj}, ax=ax, title=label)
+        if limits is not None:
+            ax.set(xlim=limits[0], ylim=limits[1])
+    plot_errors(errors, ax=fig.add_subplot(gs[1, :]), title=title)
+    return fig
+
+
+def heading_sensitivity_figure(headings_deg, rmse, marks):
+    """Whole-run RMSE of dead reckoning against its initial heading, with ``marks``
+    (label, heading_deg, rmse) for the headings the chapter compares."""
+    fig, ax = figure(height=3.8)
+    ax.plot(headings_deg, rmse, "-")
+    for label, h, r in marks:
+        ax.plot(h, r, "o", ms=7, label=f"{label}: {h:.0f} deg, RMSE {r:.1f} m")
+    ax.set(xlabel="initial heading [deg]", ylabel="RMSE vs GPS [m]",
+           title="Dead reckoning against its initial heading")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="upper right")
+    return fig
+
+
+def heading_drift_figure(t_gps, heading_error_deg, odometry):
+    """Dead-reckoned minus slip-corrected GPS heading along the run (top) above the
+    steering (bottom), so that the turns where the heading is lost line up."""
+    fig, (ax0, ax1) = figure(2, 1, height=5.0, sharex=True, height_ratios=[1.4, 1])
+    ax0.plot(t_gps, heading_error_deg, ".", ms=3)
+    ax0.set(ylabel="heading error [deg]",
+            title="Heading drift of dead reckoning (dead-reckoned minus GPS heading)")
+    ax1.plot(odometry.t, odometry.steering, color="tab:orange", lw=0.8)
+    ax1.axhline(0.59, color="0.5", ls=":", lw=0.8)
+    ax1.set(xlabel="time [s]", ylabel="steering [rad]")
+    for ax in (ax0, ax1):
+        ax.grid(True, alpha=0.3)
+    return fig
+

@@ -22,12 +22,12 @@ from ..slam.dead_reckoning import dead_reckon
 from ..models.geometry import rot
 from ..models.geometry import interpolate_poses
 from ..plots.data import car_outline
-from ..plots.style import show_widget_figure, widget_figure
+from ..plots.style import figure, show_widget_figure, widget_figure
 from ..data.records import Dataset, Odometry
 from ..models.vehicle import Vehicle
 from ..plots.style import notebook_setup as setup
 
-__all__ = ["setup", "Stretch", "car_park_stretch", "offset_paths", "offset_summary", "best_offset",
+__all__ = ["setup", "offset_geometry_figure", "slip_figure", "Stretch", "car_park_stretch", "offset_paths", "offset_summary", "best_offset",
            "rms_surface", "plot_offset_geometry", "plot_offset_stretch", "plot_rms_surface", "offset_explorer"]
 
 #: A right turn of about 200 degrees at full lock, entered from a near-straight (seconds).
@@ -233,7 +233,7 @@ def plot_rms_surface(stretch: Stretch, a_values, b_values, *, vehicle: Vehicle |
     """Contours of :func:`rms_surface`, with the best fit (black dot) and the nominal
     offset of ``vehicle`` (red triangle). Returns the axes."""
     if ax is None:
-        _, ax = plt.subplots(figsize=(6, 4.5))
+        _, ax = figure(height=4.5)
     rms = rms_surface(stretch, a_values, b_values, align=align)
     levels = np.array([0.05, 0.1, 0.2, 0.3, 0.5, 1.0, 2.0])
     cs = ax.contour(a_values, b_values, rms, levels=levels[levels > rms.min()], cmap="viridis")
@@ -276,3 +276,28 @@ def offset_explorer(ds: Dataset, t0: float = TURN[0], t1: float = TURN[1]):
         align=Checkbox(value=True, description="fit initial heading"))
     widget.holder = holder
     return widget
+
+
+def offset_geometry_figure(vehicle: Vehicle, headings_deg=(30.0, 150.0)):
+    """The lever arm at two headings side by side: a and b stay fixed in the car, so the
+    laser's offset from C turns with the heading (section 4.1, Figure 4)."""
+    fig, axs = figure(1, len(headings_deg), height=4.8)
+    for ax, h in zip(np.atleast_1d(axs), headings_deg):
+        plot_offset_geometry(vehicle, phi=np.radians(h), ax=ax)
+        ax.set_title(f"heading {h:g} deg: a = {vehicle.a} m ahead, b = {vehicle.b} m left of C")
+    return fig
+
+
+def slip_figure(t_gps, slip_gps_deg, t_model, slip_model_deg):
+    """The laser's slip angle (course minus heading) along a turn: measured by GPS and
+    predicted by the model, against zero (the offset ignored)."""
+    fig, ax = figure(height=3.8)
+    ax.plot(t_gps, slip_gps_deg, ".", color="tab:blue", label="GPS course − heading (measured)")
+    ax.plot(t_model, slip_model_deg, "-", color="tab:red", label="model, a = 3.78, b = 0.50")
+    ax.axhline(0, color="0.4", lw=1.5, label="model with the offset ignored (a = b = 0)")
+    ax.set(xlabel="time [s]", ylabel="slip angle of the laser [deg]",
+           title="The laser point side-slips in a turn; the rear axle does not")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="lower left")
+    return fig
+

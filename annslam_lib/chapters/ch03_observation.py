@@ -1,4 +1,5 @@
-"""Chapter 03 explorer: a landmark's predicted measurement and its uncertainty.
+"""Chapter 03 companion: a landmark's predicted measurement and its uncertainty (the
+explorer), and the chapter's figures.
 
 The laser sits at the origin of the world, heading East (phi = 0), so the world
 frame is the laser frame: x forward, y left. The pose is uncertain (position
@@ -19,7 +20,7 @@ from ipywidgets import FloatSlider, interactive
 from .. import _checks
 from ..models.geometry import wrap_angle
 from ..models.observation import observe
-from ..plots.style import show_widget_figure, widget_figure
+from ..plots.style import figure, show_widget_figure, widget_figure
 from ..models.uncertainty import coverage, draw_ellipse, expected_coverage, monte_carlo, propagate
 from ..plots.style import notebook_setup as setup
 
@@ -31,7 +32,9 @@ SIGMA_BEARING = math.radians(1.0)
 #: Size of the two panels of :func:`draw_prediction`.
 PREDICTION_FIGSIZE = (11, 4.5)
 
-__all__ = ["setup", "measurement_prediction", "draw_prediction", "measurement_explorer"]
+__all__ = ["setup", "measurement_prediction", "draw_prediction", "measurement_explorer",
+           "jacobian_sparsity_figure", "printed_bearing_figure", "edge_frame_figure",
+           "linearisation_figure", "banana_figure"]
 
 
 def measurement_prediction(landmark_x: float, landmark_y: float, *, sigma_xy: float,
@@ -177,3 +180,108 @@ def measurement_explorer(*, landmark=(10.0, 3.0), sigma_xy: float = 0.3,
     )
     widget.holder = holder
     return widget
+
+
+def jacobian_sparsity_figure(H_full, n_landmarks: int, seen: int):
+    """Which entries of the full observation Jacobian dh/dX are non-zero for a sighting of
+    landmark ``seen`` (numbered from 1) in a state of ``n_landmarks`` landmarks."""
+    fig, ax = figure(height=2.4)
+    ax.imshow(np.asarray(H_full) != 0, cmap="Greys", vmin=0, vmax=1.6, aspect="equal")
+    labels = ["x", "y", "φ"] + [f"{c}{k}" for k in range(1, n_landmarks + 1) for c in ("x", "y")]
+    ax.set_xticks(range(len(labels)), labels)
+    ax.set_yticks([0, 1], ["range", "bearing"])
+    ax.set_xticks(np.arange(-0.5, len(labels)), minor=True)
+    ax.set_yticks([-0.5, 0.5, 1.5], minor=True)
+    ax.grid(which="minor", color="0.7")
+    ax.tick_params(which="minor", length=0)
+    ax.set_title(f"∂h/∂X for a sighting of landmark {seen}: dark = non-zero")
+    return fig
+
+
+def printed_bearing_figure(landmarks, off, heading: float):
+    """Landmarks on a ring around the laser (at the origin, heading ``heading``), marked
+    where the printed bearing (an atan of a ratio) is off by pi."""
+    landmarks, off = np.asarray(landmarks), np.asarray(off, dtype=bool)
+    fig, (ax0, ax1) = figure(1, 2, height=4.8)
+    ax0.scatter(*landmarks[~off].T, s=12, color="tab:green", label="printed bearing right")
+    ax0.scatter(*landmarks[off].T, s=12, color="tab:red", marker="x",
+                label="printed bearing off by π")
+    ax0.plot(0, 0, "k^", ms=10)
+    ax0.annotate("", xy=(6 * math.cos(heading), 6 * math.sin(heading)), xytext=(0, 0),
+                 arrowprops=dict(arrowstyle="->", lw=2))
+    ax0.axvline(0, color="k", lw=0.8, ls=":")
+    ax0.set(xlabel="x [m]", ylabel="y [m]", aspect="equal",
+            title="atan of a ratio: wrong for every landmark with x_i < x_L")
+    ax0.legend(loc="lower left", fontsize=8)
+    ang = np.degrees(np.arctan2(landmarks[:, 1], landmarks[:, 0]))
+    ax1.hist([ang[~off], ang[off]], bins=36, range=(-180, 180), stacked=True,
+             color=["tab:green", "tab:red"], label=["right", "off by π"])
+    ax1.set(xlabel="direction of the landmark from the laser [deg]", ylabel="landmarks",
+            title="which directions the print gets wrong")
+    ax1.legend(loc="upper right")
+    return fig
+
+
+def edge_frame_figure(points, segment, beams, p_right, p_left, frame, origin_printed):
+    """A straight edge in one scan and the landmark frame the two-point construction puts on
+    it (corrected), against the origin the printed transform implies."""
+    fig, ax = figure(height=5.5)
+    ax.plot(*np.asarray(points).T, ".", ms=3, color="0.6", label="the scan")
+    ax.plot(*np.asarray(segment).T, ".", ms=5, color="tab:blue", label=f"beams {beams[0]}..{beams[1]}")
+    ax.plot(*p_right, "o", color="tab:orange", ms=9, label="P_r (right end)")
+    ax.plot(*p_left, "s", color="tab:purple", ms=9, label="P_l (left end, origin)")
+    c, s = math.cos(frame[2]), math.sin(frame[2])
+    p_left = np.asarray(p_left, dtype=float)
+    for vec, colour, name in (((c, s), "tab:red", "landmark x"), ((-s, c), "tab:green", "landmark y")):
+        ax.annotate("", xy=p_left + 2.0 * np.array(vec), xytext=p_left,
+                    arrowprops=dict(arrowstyle="->", color=colour, lw=2))
+        ax.text(*(p_left + 2.3 * np.array(vec)), name, color=colour, fontsize=9)
+    ax.plot(*origin_printed, "x", color="tab:red", ms=10, mew=2, label="origin implied by the print")
+    ax.annotate("", xy=np.asarray(origin_printed) + 2.0 * np.array([c, s]), xytext=origin_printed,
+                arrowprops=dict(arrowstyle="->", color="tab:red", lw=1, ls="--"))
+    ax.plot(0, 0, "k^", ms=9, label="laser")
+    ax.set(xlabel="x forward [m]", ylabel="y left [m]", aspect="equal", xlim=(-8, 10), ylim=(-4, 11),
+           title="the landmark frame of a straight edge")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.02, 0.5))
+    return fig
+
+
+def linearisation_figure(cases: dict):
+    """Monte Carlo against the linearised 2-sigma ellipse in measurement space (bearing,
+    range) for each {range: (centre, S, mc_mean, mc_cov, samples)}."""
+    fig, axes = figure(1, len(cases), height=4.2)
+    to_deg = np.diag([180 / math.pi, 1.0])
+    for ax, (rr, (centre, S, m, C, samples)) in zip(np.atleast_1d(axes), cases.items()):
+        ax.plot(np.degrees(samples[::16, 1]), samples[::16, 0], ".", ms=2, color="0.7",
+                label="Monte Carlo (true h)")
+        draw_ellipse(ax, [math.degrees(centre[1]), centre[0]], to_deg @ S[::-1, ::-1] @ to_deg,
+                     2.0, color="tab:green", lw=2, label="2σ of H P Hᵀ")
+        draw_ellipse(ax, [math.degrees(m[1]), m[0]], to_deg @ C[::-1, ::-1] @ to_deg, 2.0,
+                     color="tab:red", ls="--", label="2σ of the Monte-Carlo covariance")
+        ax.set(xlabel="bearing [deg]", ylabel="range [m]", title=f"landmark at {rr:g} m")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=8, loc="upper right")
+    return fig
+
+
+def banana_figure(cases: dict):
+    """A new landmark at 20 m from an uncertain heading: Monte Carlo of the inverse model
+    against its linearised 2-sigma ellipse, for each {heading sd (deg): (centre, S, mc_mean,
+    mc_cov, samples)}; small spreads zoomed with x stretched to show the bend."""
+    fig, axes = figure(1, len(cases), height=5.0, width_ratios=[1] + [1.7] * (len(cases) - 1))
+    for ax, (sd_deg, (centre, S, m, C, samples)) in zip(np.atleast_1d(axes), cases.items()):
+        ax.plot(*samples[::16].T, ".", ms=2, color="0.7", label="Monte Carlo (true g)")
+        draw_ellipse(ax, centre, S, 2.0, color="tab:green", lw=2, label="2σ of G P Gᵀ")
+        ax.plot(*centre, "g+", ms=12, label="g(mean)")
+        ax.plot(*m, "rx", ms=10, label="Monte-Carlo mean")
+        ax.plot(0, 0, "k^", ms=9, label="laser")
+        ax.set(xlabel="x forward [m]", ylabel="y left [m]",
+               title=f"new landmark at 20 m, heading sd {sd_deg:g}°")
+        ax.grid(True, alpha=0.3)
+        if sd_deg < 10:       # zoomed, x stretched, to show the bend
+            ax.set(xlim=(18.6, 20.6), ylim=(-8, 8), title=ax.get_title() + " (x stretched)")
+        else:
+            ax.set(aspect="equal")
+            ax.legend(fontsize=8, loc="lower left")
+    return fig

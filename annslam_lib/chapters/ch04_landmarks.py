@@ -21,7 +21,7 @@ from ..perception.beacons import BeaconConfig, beacon_config_for, beacons_from_s
 from ..perception.sources import gps_scan_poses
 from ..models.geometry import wrap_angle
 from ..models.observation import observe
-from ..plots.style import show_widget_figure, widget_figure
+from ..plots.style import figure, show_widget_figure, widget_figure
 from ..data.records import Dataset
 from ..models.uncertainty import ellipse_points
 from ..plots.style import notebook_setup as setup
@@ -32,7 +32,8 @@ OUTCOME_STYLE = {NEW: ("tab:green", "new landmark"), REJECTED: ("tab:red", "reje
 GATE_COLORS = ("tab:blue", "tab:orange", "tab:purple", "tab:brown", "tab:cyan", "tab:olive",
                "tab:pink", "tab:gray")
 
-__all__ = ["setup", "beacon_scan_summary", "draw_beacon_scan", "beacon_scrubber", "draw_gates",
+__all__ = ["setup", "beacon_scans_figure", "tape_levels_figure", "residuals_figure", "extracted_map_figure",
+           "tree_detections_figure", "gates_figure", "gate_sweep_figure", "beacon_scan_summary", "draw_beacon_scan", "beacon_scrubber", "draw_gates",
            "crafted_scene", "gate_explorer"]
 
 
@@ -87,7 +88,7 @@ def draw_beacon_scan(ds: Dataset, summary: dict, ax=None, *, max_range: float = 
     (red, sized by level), extracted centres (black +) with the ``n_sigma`` ellipse of R
     mapped to x, y, and the surveyed beacons predicted from the GPS pose (blue circles)."""
     if ax is None:
-        _, ax = plt.subplots(figsize=(7, 5))
+        _, ax = figure(height=5.0)
     laser, k = ds.laser, summary["scan"]
     r, b, lv = laser.ranges[k], laser.angles, laser.intensity[k]
     keep = r < min(max_range, laser.max_range)
@@ -233,3 +234,125 @@ def gate_explorer(*, prob: float = 0.99, new_prob: float = 0.9999):
                                                     continuous_update=False))
     widget.holder = holder
     return widget
+
+
+def tape_levels_figure(ranges, levels):
+    """Tape beams of a run by range, stacked by intensity level 1-4."""
+    ranges, levels = np.asarray(ranges), np.asarray(levels)
+    fig, ax = figure(height=3.6)
+    ax.hist([ranges[levels == lv] for lv in range(1, 5)], bins=np.arange(0, 17, 0.5),
+            stacked=True, label=[f"level {lv}" for lv in range(1, 5)])
+    ax.set(xlabel="range [m]", ylabel="tape beams",
+           title="Car Park: tape beams by range and intensity level")
+    ax.legend(loc="upper right")
+    ax.grid(True, alpha=0.3)
+    return fig
+
+
+def _normal(x, sd):
+    return np.exp(-0.5 * (x / sd) ** 2) / (sd * math.sqrt(2 * math.pi))
+
+
+def residuals_figure(res, stats: dict, config: BeaconConfig):
+    """Range and bearing residuals of the extracted beacons against the survey seen from
+    GPS, with the normal densities of the chosen sigma_r and sigma_beta."""
+    fig, (a1, a2) = figure(1, 2, height=3.8)
+    m = res.matched
+    a1.hist(100 * res.range[m], bins=np.arange(-15, 16, 1), density=True, color="tab:blue", alpha=0.7)
+    x = np.linspace(-15, 15, 200)
+    sr = 100 * config.sigma_range
+    a1.plot(x, _normal(x, sr), "k-", label=f"N(0, {sr:.0f} cm): the chosen σ_r")
+    a1.set(xlabel="range residual [cm]", ylabel="density",
+           title=f"range: mean {100 * stats['range_mean']:+.1f} cm, sd {100 * stats['range_std']:.1f} cm")
+    a1.legend(loc="upper left")
+    a2.hist(np.degrees(res.bearing[m]), bins=np.arange(-4, 4.25, 0.25), density=True,
+            color="tab:orange", alpha=0.7)
+    x = np.linspace(-4, 4, 200)
+    sb = math.degrees(config.sigma_bearing)
+    a2.plot(x, _normal(x, sb), "k-", label=f"N(0, {sb:.0f}°): the chosen σ_β")
+    a2.set(xlabel="bearing residual [deg]",
+           title=f"bearing vs GPS heading: mean {math.degrees(stats['bearing_mean']):+.2f}°, "
+                 f"sd {math.degrees(stats['bearing_std']):.2f}°")
+    a2.legend(loc="upper left")
+    for a in (a1, a2):
+        a.grid(True, alpha=0.3)
+    return fig
+
+
+def extracted_map_figure(ds: Dataset, world, ok, intensity):
+    """Every extracted beacon placed in the world from the GPS pose of its scan (colour:
+    intensity level) against 1 m circles around the surveyed beacons; right, a zoom on
+    the busiest beacon."""
+    world, ok = np.asarray(world), np.asarray(ok, dtype=bool)
+    fig, axs = figure(1, 2, height=5.6, width_ratios=[1, 1])
+    near = np.hypot(*(world[ok, None, :] - ds.beacons[None]).transpose(2, 0, 1)) < 1.0
+    busiest = int(np.argmax(near.sum(axis=0)))
+    for ax, zoom in zip(axs, (False, True)):
+        ax.plot(ds.gps.east, ds.gps.north, "-", color="0.7", lw=1, label="GPS track")
+        for n_, b_ in enumerate(ds.beacons):
+            ax.add_patch(plt.Circle(b_, 1.0, fill=False, color="tab:red",
+                                    label="1 m around a surveyed beacon" if n_ == 0 else None))
+        sc = ax.scatter(*world[ok].T, s=5 if not zoom else 12, c=np.asarray(intensity)[ok],
+                        cmap="viridis", label="extracted beacons (colour: level)")
+        ax.set(xlabel="East x [m]", ylabel="North y [m]", aspect="equal")
+        ax.grid(True, alpha=0.3)
+        if zoom:
+            bx, by = ds.beacons[busiest]
+            ax.set(xlim=(bx - 1.5, bx + 1.5), ylim=(by - 1.5, by + 1.5),
+                   title=f"beacon {busiest}: {near[:, busiest].sum()} extractions")
+            fig.colorbar(sc, ax=ax, label="intensity level")
+        else:
+            ax.set(xlim=(-10, 20), ylim=(-25, 20), title=f"{ok.sum()} beacons placed from the GPS pose")
+            ax.legend(fontsize=8, loc="lower left")
+    return fig
+
+
+def tree_detections_figure(trees):
+    """Victoria Park's tree detections: ranges, bearings, and diameter against range with
+    the chord of one beam."""
+    fig, axs = figure(1, 3, height=3.6)
+    axs[0].hist(trees.range, bins=np.arange(0, 80, 2), color="tab:green")
+    axs[0].set(xlabel="range [m]", ylabel="detections")
+    axs[1].hist(np.degrees(trees.bearing), bins=np.arange(0, 181, 5), color="tab:green")
+    axs[1].set(xlabel="bearing [deg] (90 = ahead)")
+    axs[2].scatter(trees.range[::5], trees.diameter[::5], s=1, alpha=0.3, color="tab:green",
+                   label="trees (every 5th)")
+    rr = np.linspace(0, 80, 50)
+    axs[2].plot(rr, rr * math.radians(0.5), "k-", label="one beam chord, r × 0.5°")
+    axs[2].set(xlabel="range [m]", ylabel="diameter [m]", ylim=(0, 1.5))
+    axs[2].legend(loc="upper left")
+    for a in axs:
+        a.grid(True, alpha=0.3)
+    fig.suptitle("Victoria Park tree detections")
+    return fig
+
+
+def gates_figure(scene: dict, assign, zoom=((54, 61), (9.2, 12.4))):
+    """The crafted scene's 99 % gates in measurement space, and a zoom on ``zoom``."""
+    fig, (a1, a2) = figure(1, 2, height=5.0, width_ratios=[3, 2])
+    draw_gates(a1, scene["zhat"], scene["S"], scene["z"], assign, title="99 % gates in measurement space")
+    draw_gates(a2, scene["zhat"], scene["S"], scene["z"], assign, title="zoom on z0 (dashed: the match)")
+    a2.set(xlim=zoom[0], ylim=zoom[1])
+    return fig
+
+
+def gate_sweep_figure(probs, table):
+    """Correct, missed and wrong associations against the gate probability (log scale)."""
+    fig, ax = figure(height=4.0)
+    x = np.arange(len(probs))
+    for key, color in (("correct", "tab:green"), ("missed", "tab:orange"), ("wrong", "tab:red")):
+        ax.plot(x, [row[key] for row in table], "o-", color=color, label=key)
+    ax.set_yscale("log")
+    ax.set_xticks(x, [f"{p:.8g}" for p in probs])
+    ax.set(xlabel="gate probability p", ylabel="measurements", title="too small: missed; too large: wrong")
+    ax.legend(loc="center right")
+    ax.grid(True, alpha=0.3)
+    return fig
+
+
+def beacon_scans_figure(ds: Dataset, scans, *, max_range: float = 16.0):
+    """:func:`draw_beacon_scan` of several scans side by side (the explorer's frames)."""
+    fig, axs = figure(1, len(scans), height=5.2)
+    for ax, k in zip(np.atleast_1d(axs), scans):
+        draw_beacon_scan(ds, beacon_scan_summary(ds, k), ax=ax, max_range=max_range)
+    return fig

@@ -151,14 +151,20 @@ def student_version(nb, name: str = "notebook"):
     """A copy of instructor notebook ``nb`` for students: every solution region replaced by
     nbgrader's stub (code: ``# YOUR CODE HERE`` / ``raise NotImplementedError()``, indented
     like the marker; text: ``YOUR ANSWER HERE``), hidden tests removed, outputs and
-    execution counts cleared, nbgrader metadata kept."""
+    execution counts cleared, nbgrader metadata kept. A solution cell without a region (an
+    ungraded exercise's written answer) becomes the stub as a whole, as in nbgrader; a code
+    cell whose stub stands at the top level is tagged ``raises-exception`` like the test
+    cells, so Run All goes on past an exercise not done yet."""
     validate(nb, name)
     nb = copy.deepcopy(nb)
     for i, cell in enumerate(nb.cells):
         where = f"{name}, cell {i}"
         stub = CODE_STUB if cell.cell_type == "code" else TEXT_STUB
-        cell.source = _replace(cell.source, _regions(cell.source, BEGIN_SOLUTION, END_SOLUTION,
-                                                     where), stub)
+        regions = _regions(cell.source, BEGIN_SOLUTION, END_SOLUTION, where)
+        if _is_solution(cell) and not regions:
+            cell.source = stub                 # nbgrader: a solution cell without a region
+        else:
+            cell.source = _replace(cell.source, regions, stub)
         cell.source = _replace(cell.source, _regions(cell.source, BEGIN_HIDDEN, END_HIDDEN,
                                                      where), None)
         if cell.cell_type == "code":
@@ -166,6 +172,9 @@ def student_version(nb, name: str = "notebook"):
             cell.metadata.pop("execution", None)
             if _is_grade(cell) and not _is_solution(cell):
                 _tag_raises(cell)
+            elif _is_solution(cell) and re.search(r"^raise NotImplementedError", cell.source,
+                                                  re.M):
+                _tag_raises(cell)              # an unindented stub raises when the cell runs
     nb.metadata.pop("widgets", None)  # saved widget state belongs to the executed copy
     return nb
 

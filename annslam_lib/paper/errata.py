@@ -592,13 +592,30 @@ CONFIRMED: list[Erratum] = [
 
 
 
-def errata_table(entries: list[Erratum] | None = None) -> list[dict]:
+def _entries(entries) -> list[Erratum]:
+    """``entries`` as records: None (all of :data:`ERRATA`), records, or their keys (from
+    :data:`ERRATA` and :data:`CONFIRMED`, in the order given; an unknown key is an error)."""
+    if entries is None:
+        return list(ERRATA)
+    by_key = {e.key: e for e in (*ERRATA, *CONFIRMED)}
+    out = []
+    for e in entries:
+        if isinstance(e, str):
+            if e not in by_key:
+                raise KeyError(f"no erratum {e!r}; known: {', '.join(sorted(by_key))}")
+            e = by_key[e]
+        out.append(e)
+    return out
+
+
+def errata_table(entries=None) -> list[dict]:
     """Rows for display: the record's fields plus the computed discrepancies
-    ``printed_error`` and ``corrected_error`` (None where there is no check)."""
+    ``printed_error`` and ``corrected_error`` (None where there is no check). ``entries``:
+    records or keys (see :func:`_entries`), all errata by default."""
     rows = []
-    for e in ERRATA if entries is None else entries:
+    for e in _entries(entries):
         rows.append({
-            "section": e.section, "quantity": e.quantity, "kind": e.kind,
+            "key": e.key, "section": e.section, "quantity": e.quantity, "kind": e.kind,
             "printed": e.printed, "correct": e.correct,
             "printed_error": None if e.check is None else e.check(),
             "corrected_error": None if e.check_correct is None else e.check_correct(),
@@ -612,19 +629,37 @@ def _fmt_error(x: float | None) -> str:
     return "—" if x is None else f"{x:.2g}"
 
 
+def _cell(text: str) -> str:
+    # LaTeX's norm bars would end the table cell: write them as \Vert.
+    return text.replace(r"\|", r"\Vert ").replace("|", r"\|").replace("\n", " ")
 
-def errata_markdown(entries: list[Erratum] | None = None) -> str:
+
+def errata_markdown(entries=None, *, formulas: str = "inline") -> str:
     """The errata as a Markdown table (the README's table is this output, tested):
     section, quantity, printed form, correct form, kind, and the measured
-    discrepancy of the printed and the corrected form (see :class:`Erratum`)."""
-    def cell(text: str) -> str:
-        # LaTeX's norm bars would end the table cell: write them as \Vert.
-        return text.replace(r"\|", r"\Vert ").replace("|", r"\|").replace("\n", " ")
+    discrepancy of the printed and the corrected form (see :class:`Erratum`).
 
-    lines = ["| § | quantity | printed | correct | kind | error printed | error corrected |",
-             "|---|---|---|---|---|---|---|"]
-    for r in errata_table(entries):
-        lines.append(f"| {r['section']} | {cell(r['quantity'])} | ${cell(r['printed'])}$ | "
-                     f"${cell(r['correct'])}$ | {r['kind']} | {_fmt_error(r['printed_error'])} | "
-                     f"{_fmt_error(r['corrected_error'])} |")
+    ``formulas="below"`` (the chapters' form) keeps the table narrow, section, quantity,
+    kind and the two discrepancies, and lists the printed and correct formulas under it,
+    one line per erratum, where long formulas wrap instead of pushing the error columns
+    off the page. ``entries``: records or keys, all errata by default."""
+    if formulas not in ("inline", "below"):
+        raise ValueError(f"formulas must be 'inline' or 'below', got {formulas!r}")
+    rows = errata_table(entries)
+    if formulas == "inline":
+        lines = ["| § | quantity | printed | correct | kind | error printed | error corrected |",
+                 "|---|---|---|---|---|---|---|"]
+        for r in rows:
+            lines.append(f"| {r['section']} | {_cell(r['quantity'])} | ${_cell(r['printed'])}$ | "
+                         f"${_cell(r['correct'])}$ | {r['kind']} | "
+                         f"{_fmt_error(r['printed_error'])} | {_fmt_error(r['corrected_error'])} |")
+        return "\n".join(lines)
+    lines = ["| | § | quantity | kind | error printed | error corrected |",
+             "|---|---|---|---|---|---|"]
+    for i, r in enumerate(rows, 1):
+        lines.append(f"| {i} | {r['section']} | {_cell(r['quantity'])} | {r['kind']} | "
+                     f"{_fmt_error(r['printed_error'])} | {_fmt_error(r['corrected_error'])} |")
+    lines.append("")
+    for i, r in enumerate(rows, 1):
+        lines.append(f"{i}. `{r['key']}`: printed ${r['printed']}$; correct ${r['correct']}$")
     return "\n".join(lines)

@@ -12,8 +12,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.figure import Figure
 
-__all__ = ["notebook_setup", "axes", "widget_figure", "show_widget_figure", "BEACON_STYLE",
-           "FIG_WIDTH", "DPI"]
+__all__ = ["notebook_setup", "axes", "figure", "widget_figure", "show_widget_figure",
+           "BEACON_STYLE", "FIG_WIDTH", "DPI"]
 
 #: Width of a full-width figure (inches) and the resolution of the notebook's images: a
 #: figure FIG_WIDTH wide at DPI fills about 1000 px, the text column of JupyterLab at
@@ -65,3 +65,10 @@ def axes(ax=None, figsize=(6, 6)):
     if ax is None:
         _, ax = plt.subplots(figsize=figsize)
     return ax
+
+
+def figure(nrows: int = 1, ncols: int = 1, *, height: float = 4.5, **subplots_kw):
+    """A full-width pyplot figure (:data:`FIG_WIDTH` wide, ``height`` inches tall) and its
+    axes: every chapter figure starts here, so all use the notebook's width."""
+    return plt.subplots(nrows, ncols, figsize=(FIG_WIDTH, height), **subplots_kw)
+
