@@ -42,9 +42,13 @@ def chapter(name: str) -> dict:
     for c in code:
         meta = c.metadata.get("nbgrader", {})
         if meta.get("solution"):
-            before = set(ns)
-            exec(compile(c.source, f"<{name} {meta['grade_id']}>", "exec"), ns)
-            out.update({k: ns[k] for k in set(ns) - before if callable(ns[k])})
+            # Only the functions: an ungraded exercise's solution cell is top-level code
+            # that needs the notebook's earlier state.
+            tree = ast.parse(c.source)
+            defs = [n for n in tree.body if isinstance(n, ast.FunctionDef)]
+            for node in defs:
+                exec(compile(ast.Module([node], []), f"<{name} {meta['grade_id']}>", "exec"), ns)
+                out[node.name] = ns[node.name]
     if not out:
         raise LookupError(f"notebook {name!r} has no solution cells")
     return out

@@ -337,6 +337,24 @@ def test_pseudo_measurement_round_trip(quick_model, sim):
         ann.InverseModel(0.0, 0.02)
 
 
+def test_numpy_inference_equals_torch_forward(quick_model, sim):
+    """The run-time forward pass (numpy) against the training one (torch), on every sample
+    and on one-row batches: equal to 1e-12 of the output's scale (float64 both)."""
+    from annslam_lib.ann import network
+
+    _, _, ts = sim
+    xn = (ts.X[:, quick_model._cols] - quick_model.x_mean) / quick_model.x_std
+    with torch.no_grad():
+        ref = network._forward(quick_model.theta, torch.from_numpy(xn), quick_model._shapes).numpy()
+    got = network._forward_numpy(quick_model.theta.numpy(), xn, quick_model._shapes)
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12 * np.abs(ref).max())
+    one = np.vstack([network._forward_numpy(quick_model.theta.numpy(), xn[i:i + 1], quick_model._shapes)
+                     for i in range(20)])
+    np.testing.assert_allclose(one, ref[:20], rtol=0, atol=1e-12 * np.abs(ref).max())
+    with pytest.raises(ValueError, match="one laser pose"):
+        quick_model.pseudo_measurement(ts.pose[:2], ts.z[:2])
+
+
 # --------------------------------------------------------------------------- ANN-enhanced EKF-SLAM
 
 def _zero_model(sigma_range, sigma_bearing):

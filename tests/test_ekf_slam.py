@@ -356,10 +356,13 @@ def test_nan_state_is_rejected():
 
 
 def test_singular_innovation_covariance_is_a_clear_error():
-    """Zero uncertainty everywhere and zero measurement noise: S = 0, no gain exists."""
+    """Zero uncertainty everywhere and a noise whose square underflows to 0: S = 0, no
+    gain exists (a noise of exactly 0 is refused on entry)."""
     f = EkfSlam([0.0, 0.0, 0.0], np.zeros((3, 3)), ACFR_UTE)
-    f.augment([[5.0, 1.0]], 0.0, 0.0)
+    f.augment([[5.0, 1.0]], 1e-200, 1e-200)
     with pytest.raises(InnovationError, match="not positive definite"):
+        f.update([[5.0, 1.0]], [0], 1e-200, 1e-200)
+    with pytest.raises(ValueError, match="sigma must be finite and > 0"):
         f.update([[5.0, 1.0]], [0], 0.0, 0.0)
     assert issubclass(InnovationError, ValueError)
 
@@ -389,3 +392,51 @@ def test_run_uses_one_blas_thread_and_restores_the_setting():
     with threads.one_blas_thread():
         assert [get() for _, get in controls] == [1] * len(controls)
     assert [get() for _, get in controls] == before
+
+
+# ------------------------------------------------------------------ arguments checked on entry
+
+_SR, _SB = 0.1, math.radians(1)
+BAD_CALLS = [
+    ("remove([-1]) would delete the pose's rows", lambda f: f.remove([-1]), ValueError, "out of range"),
+    ("remove past the last landmark", lambda f: f.remove([20]), ValueError, "out of range"),
+    ("remove with float indices", lambda f: f.remove([1.5]), TypeError, "integers"),
+    ("predict with dt NaN", lambda f: f.predict(_controls()[0], math.nan), ValueError, "dt"),
+    ("predict with dt inf", lambda f: f.predict(_controls()[0], math.inf), ValueError, "dt"),
+    ("predict backwards in time", lambda f: f.predict(_controls()[0], -0.1), ValueError, "dt"),
+    ("update with sigma NaN", lambda f: f.update([[10.0, 1.0]], [0], math.nan, _SB), ValueError, "sigma"),
+    ("update with zero noise", lambda f: f.update([[10.0, 1.0]], [0], _SR, 0.0), ValueError, "sigma"),
+    ("update with a negative range", lambda f: f.update([[-10.0, 1.0]], [0], _SR, _SB), ValueError, "range > 0"),
+    ("update with a NaN bearing", lambda f: f.update([[10.0, math.nan]], [0], _SR, _SB), ValueError, "finite"),
+    ("augment with a zero range", lambda f: f.augment([[0.0, 1.0]], _SR, _SB), ValueError, "range > 0"),
+    ("augment with sigma inf", lambda f: f.augment([[5.0, 1.0]], math.inf, _SB), ValueError, "sigma"),
+    ("augment with triples", lambda f: f.augment(np.ones((2, 3)), _SR, _SB), ValueError, r"\(n, 2\)"),
+    ("gating with a negative sigma", lambda f: f.innovation_d2([[5.0, 1.0]], -_SR, _SB), ValueError, "sigma"),
+    ("gps fix NaN", lambda f: f.gps_update([math.nan, 0.0], 0.05), ValueError, "finite"),
+    ("gps sigma zero", lambda f: f.gps_update([0.0, 0.0], 0.0), ValueError, "sigma"),
+]
+
+
+@pytest.mark.parametrize("what, call, error, match", BAD_CALLS, ids=[b[0] for b in BAD_CALLS])
+def test_bad_arguments_raise_and_leave_the_filter_unchanged(what, call, error, match):
+    """Finding 5 of the science review: each of these used to be accepted (remove([-1])
+    silently deleted the pose's y and phi). Both backends refuse it the same way, and the
+    state is untouched."""
+    for f in _filter_with_landmarks():
+        x, P = (a.copy() for a in f.state())
+        with pytest.raises(error, match=match):
+            call(f)
+        x2, P2 = f.state()
+        np.testing.assert_array_equal(x2, x)
+        np.testing.assert_array_equal(P2, P)
+
+
+def test_zero_dt_is_no_step_and_good_calls_still_work():
+    for f in _filter_with_landmarks():
+        x = f.state()[0].copy()
+        f.predict(_controls()[0], 0.0)
+        np.testing.assert_array_equal(f.state()[0], x)
+        f.remove([0, 19])
+        assert f.n_landmarks == 18
+        f.remove([])
+        assert f.n_landmarks == 18

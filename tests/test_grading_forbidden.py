@@ -8,6 +8,7 @@ from annslam_lib.ann import network
 from annslam_lib.evaluation import map as map_eval
 from annslam_lib.evaluation import trajectory
 from annslam_lib.grading import GradingError
+from annslam_lib.grading import ann as gann
 from annslam_lib.grading import association as ga
 from annslam_lib.grading import ekf as ge
 from annslam_lib.grading import kinematics as gkin
@@ -51,6 +52,11 @@ CASES = [
      lambda t, xy, m=10.0, tol=3.0: trajectory.gps_outliers(
          trajectory.Gps(t=t, east=xy[:, 0], north=xy[:, 1]), m, tol),
      "evaluation.trajectory.gps_outliers"),
+    (gann.check_forward, "07", "my_forward",
+     lambda *a: network.forward(*a), "ann.network.forward"),
+    (gann.check_train_loop, "07", "my_train_loop",
+     lambda net, X, Y, opt, epochs: network.train_loop(net, X, Y, opt, epochs),
+     "ann.network.train_loop"),
     (gv.check_rigid_align, "08", "my_rigid_align",
      lambda a, b: map_eval.rigid_align(a, b), "evaluation.map.rigid_align"),
 ]

@@ -65,3 +65,17 @@ def test_map_errors_missed_and_bad_input(beacons):
         map_eval.map_errors(np.array([[np.nan, 0.0], [1.0, 1.0]]), beacons)
     with pytest.raises(ValueError, match="max_distance"):
         map_eval.match_landmarks(beacons, beacons, max_distance=-1)
+
+
+def test_point_rmse_against_an_independent_sum():
+    rng = np.random.default_rng(4)
+    a, b = rng.normal(size=(7, 2)), rng.normal(size=(7, 2))
+    by_hand = math.sqrt(sum(math.hypot(*(a[i] - b[i])) ** 2 for i in range(7)) / 7)
+    assert map_eval.point_rmse(a, b) == pytest.approx(by_hand, rel=1e-12)
+    assert map_eval.point_rmse(a - b) == pytest.approx(by_hand, rel=1e-12)
+    assert map_eval.point_rmse([[3.0, 4.0]]) == 5.0      # a distance, not a per-coordinate RMS
+    for bad in (np.empty((0, 2)), np.ones((3, 3)), np.ones(2)):
+        with pytest.raises(ValueError, match="non-empty"):
+            map_eval.point_rmse(bad)
+    with pytest.raises(ValueError, match="NaN"):
+        map_eval.point_rmse([[np.nan, 0.0]])

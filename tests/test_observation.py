@@ -152,6 +152,32 @@ def test_vectorised_observe_equals_loop():
         np.testing.assert_allclose(Hl[k], Hlk)
 
 
+@given(coord, coord, heading, st.lists(st.tuples(offset, offset), min_size=1, max_size=6))
+@HYP
+def test_value_only_copies_are_bitwise_observe(x, y, phi, offsets):
+    """observe_values / inverse_observe_values: the same numbers as observe / inverse_observe
+    to the last bit (they are the run-time copies of the ANN pseudo-measurement)."""
+    pose = np.array([x, y, phi])
+    lm = pose[:2] + np.array(offsets)
+    assume(np.all(np.hypot(*(lm - pose[:2]).T) > 1e-3))
+    z = observation.observe(pose, lm)[0]
+    np.testing.assert_array_equal(observation.observe_values(pose, lm), z)
+    np.testing.assert_array_equal(observation.inverse_observe_values(pose, z),
+                                  observation.inverse_observe(pose, z)[0])
+    poses = np.broadcast_to(pose, (lm.shape[0], 3))
+    np.testing.assert_array_equal(observation.inverse_observe_values(poses, z),
+                                  observation.inverse_observe(poses, z)[0])
+
+
+def test_value_only_copies_refuse_what_observe_refuses():
+    pose = np.array([1.0, 2.0, 0.3])
+    with pytest.raises(ValueError, match="coincides"):
+        observation.observe_values(pose, np.array([[1.0, 2.0]]))
+    with pytest.raises(ValueError, match="range must be > 0"):
+        observation.inverse_observe_values(pose, np.array([[0.0, 1.0]]))
+    assert observation.observe_values(pose, np.empty((0, 2))).shape == (0, 2)
+
+
 # -------------------------------------------------------- two-point frame
 
 def test_two_point_frame_geometry():

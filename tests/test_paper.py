@@ -118,3 +118,22 @@ def test_ann_printed_sides_by_hand():
     assert (lhs, rhs) == (1.5, 1.0)
     lhs, rhs = paper.ann_neuron_printed([1.0], [1.0], -2.0)
     assert lhs == rhs == -1.0                         # they agree only by accident
+
+
+def test_errata_markdown_below_layout_by_key():
+    keys = [e.key for e in paper.ERRATA[:2]]
+    md = paper.errata_markdown(keys, formulas="below")
+    table, _, listing = md.partition("\n\n")
+    rows = table.splitlines()
+    assert rows[0].count("|") == 7 and len(rows) == 2 + len(keys)    # 6 narrow columns
+    items = listing.splitlines()
+    assert [line.split("`")[1] for line in items] == keys             # formulas listed below, in order
+    for e, line in zip(paper.ERRATA[:2], items):
+        assert f"printed ${e.printed}$" in line and f"correct ${e.correct}$" in line
+    assert md == paper.errata_markdown(list(paper.ERRATA[:2]), formulas="below")  # records work too
+    # the default: every erratum, one table with the formulas inline (the README's)
+    assert paper.errata_markdown().count("\n") == len(paper.ERRATA) + 1
+    with pytest.raises(ValueError, match="formulas"):
+        paper.errata_markdown(keys, formulas="beside")
+    with pytest.raises((KeyError, ValueError), match="no-such-erratum"):
+        paper.errata_markdown(["no-such-erratum"])

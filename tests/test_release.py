@@ -73,19 +73,27 @@ def _answer(src, gid="think-a"):
     return c
 
 
-def test_written_answers_and_top_level_code_exercises_are_stubbed_and_run_all_goes_on(tmp_path):
+def test_top_level_code_exercises_are_stubbed_and_run_all_goes_on(tmp_path):
     nb = _toy()
-    nb.cells += [_answer("**Solution.** Because the gate is a chi-square quantile."),
-                 _sol("### BEGIN SOLUTION\nanswer = 42\n### END SOLUTION", "ex-c"),
+    nb.cells += [_sol("### BEGIN SOLUTION\nanswer = 42\n### END SOLUTION", "ex-c"),
                  new_code_cell("print('after')")]
     st = release.student_version(nb, "toy")
-    assert st.cells[7].source == "YOUR ANSWER HERE"            # nbgrader's text stub, whole cell
-    assert st.cells[8].source == "# YOUR CODE HERE\nraise NotImplementedError()"
-    assert "raises-exception" in st.cells[8].metadata["tags"]
+    assert st.cells[7].source == "# YOUR CODE HERE\nraise NotImplementedError()"
+    assert "raises-exception" in st.cells[7].metadata["tags"]
     assert "tags" not in st.cells[2].metadata                  # a def stub does not raise
     from nbclient import NotebookClient
     NotebookClient(st, timeout=60, kernel_name="python3", allow_errors=False).execute()
-    assert st.cells[9].outputs[0]["text"] == "after\n"
+    assert st.cells[8].outputs[0]["text"] == "after\n"
+
+
+def test_an_ungraded_written_answer_cell_is_refused_like_nbgrader_does():
+    nb = _toy()
+    nb.cells.append(_answer("**Solution.** Because the gate is a chi-square quantile."))
+    with pytest.raises(ReleaseError, match="markdown solution cell 'think-a' is not a grade cell"):
+        release.student_version(nb, "toy")
+    from nbgrader.nbgraderformat import ValidationError, MetadataValidator
+    with pytest.raises(ValidationError, match="not marked as a grade cell"):
+        MetadataValidator().validate_nb(nb)
 
 
 @pytest.mark.parametrize("mutate, message", [

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..evaluation.map import match_landmarks
-from ..models.observation import inverse_observe
+from ..models.observation import inverse_observe_values
 from ..slam.results import STATUS
 
 __all__ = ["FEATURE_NAMES", "MEASUREMENT_FEATURES", "USED_STATUS", "SPLITS", "TrainingSet",
@@ -104,7 +104,7 @@ def encode(pose, z, intensity=None, width=None) -> tuple[np.ndarray, np.ndarray]
     w = np.where(np.isnan(w), 0.0, w)
     if not np.all(np.isfinite(level)) or not np.all(np.isfinite(w)):
         raise ValueError("intensity and width must be finite (NaN width is read as 0)")
-    base = inverse_observe(pose, z)[0] if n else np.empty((0, 2))
+    base = inverse_observe_values(pose, z) if n else np.empty((0, 2))
     ray = pose[:, 2] + z[:, 1] - np.pi / 2
     X = np.column_stack([pose[:, 0], pose[:, 1], np.sin(pose[:, 2]), np.cos(pose[:, 2]),
                          z[:, 0], z[:, 1], np.sin(ray), np.cos(ray), level, w, base])

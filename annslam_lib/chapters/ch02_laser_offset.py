@@ -217,7 +217,8 @@ def plot_offset_stretch(stretch: Stretch, a: float, b: float, *, align: bool = T
             title=f"RMS {s['rms']:.3f} m; best fit a = {best[0]:.2f}, b = {best[1]:.2f}: "
                   f"{best_rms:.3f} m")
     ax2.grid(True, alpha=0.3)
-    fig.tight_layout()
+    if fig.get_layout_engine() is None:   # the course style lays out already
+        fig.tight_layout()
     return s
 
 

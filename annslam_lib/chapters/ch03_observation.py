@@ -133,7 +133,8 @@ def draw_prediction(summary: dict, *, n_samples: int = 2000, seed: int = 3, axes
                  f"(a Gaussian: {100 * expected_coverage(2.0):.1f}%)")
     a2.grid(True, alpha=0.3)
     a2.legend(fontsize=8, loc="best")
-    fig.tight_layout()
+    if fig.get_layout_engine() is None:   # the course style lays out already
+        fig.tight_layout()
     return fig
 
 
@@ -250,9 +251,13 @@ def edge_frame_figure(points, segment, beams, p_right, p_left, frame, origin_pri
 def linearisation_figure(cases: dict):
     """Monte Carlo against the linearised 2-sigma ellipse in measurement space (bearing,
     range) for each {range: (centre, S, mc_mean, mc_cov, samples)}."""
-    fig, axes = figure(1, len(cases), height=4.2)
+    ncols = min(3, len(cases))
+    nrows = -(-len(cases) // ncols)
+    fig, axes = figure(nrows, ncols, height=3.4 * nrows, squeeze=False)
+    for ax in axes.flat[len(cases):]:
+        ax.set_visible(False)
     to_deg = np.diag([180 / math.pi, 1.0])
-    for ax, (rr, (centre, S, m, C, samples)) in zip(np.atleast_1d(axes), cases.items()):
+    for k, (ax, (rr, (centre, S, m, C, samples))) in enumerate(zip(axes.flat, cases.items())):
         ax.plot(np.degrees(samples[::16, 1]), samples[::16, 0], ".", ms=2, color="0.7",
                 label="Monte Carlo (true h)")
         draw_ellipse(ax, [math.degrees(centre[1]), centre[0]], to_deg @ S[::-1, ::-1] @ to_deg,
@@ -261,7 +266,8 @@ def linearisation_figure(cases: dict):
                      color="tab:red", ls="--", label="2σ of the Monte-Carlo covariance")
         ax.set(xlabel="bearing [deg]", ylabel="range [m]", title=f"landmark at {rr:g} m")
         ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=8, loc="upper right")
+        if k == 0:                # one legend: the panels share their three entries
+            ax.legend(fontsize=8, loc="upper right")
     return fig
 
 
@@ -269,19 +275,24 @@ def banana_figure(cases: dict):
     """A new landmark at 20 m from an uncertain heading: Monte Carlo of the inverse model
     against its linearised 2-sigma ellipse, for each {heading sd (deg): (centre, S, mc_mean,
     mc_cov, samples)}; small spreads zoomed with x stretched to show the bend."""
-    fig, axes = figure(1, len(cases), height=5.0, width_ratios=[1] + [1.7] * (len(cases) - 1))
-    for ax, (sd_deg, (centre, S, m, C, samples)) in zip(np.atleast_1d(axes), cases.items()):
+    ncols = min(2, len(cases))
+    nrows = -(-len(cases) // ncols)
+    fig, axes = figure(nrows, ncols, height=4.0 * nrows, squeeze=False)
+    for ax in axes.flat[len(cases):]:
+        ax.set_visible(False)
+    fig.suptitle("a new landmark at 20 m ahead, seen from an uncertain heading")
+    for k, (ax, (sd_deg, (centre, S, m, C, samples))) in enumerate(zip(axes.flat, cases.items())):
         ax.plot(*samples[::16].T, ".", ms=2, color="0.7", label="Monte Carlo (true g)")
         draw_ellipse(ax, centre, S, 2.0, color="tab:green", lw=2, label="2σ of G P Gᵀ")
         ax.plot(*centre, "g+", ms=12, label="g(mean)")
         ax.plot(*m, "rx", ms=10, label="Monte-Carlo mean")
         ax.plot(0, 0, "k^", ms=9, label="laser")
-        ax.set(xlabel="x forward [m]", ylabel="y left [m]",
-               title=f"new landmark at 20 m, heading sd {sd_deg:g}°")
+        ax.set(xlabel="x forward [m]", ylabel="y left [m]", title=f"heading sd {sd_deg:g}°")
         ax.grid(True, alpha=0.3)
         if sd_deg < 10:       # zoomed, x stretched, to show the bend
-            ax.set(xlim=(18.6, 20.6), ylim=(-8, 8), title=ax.get_title() + " (x stretched)")
+            ax.set(xlim=(18.6, 20.6), ylim=(-8, 8), title=ax.get_title() + " (zoomed, x stretched)")
         else:
             ax.set(aspect="equal")
-            ax.legend(fontsize=8, loc="lower left")
+        if k == len(cases) - 1:   # one legend: the panels share their entries
+            ax.legend(fontsize=8, loc="center left")
     return fig

@@ -1,4 +1,5 @@
-"""Chapter 05 explorer: the EKF-SLAM run on the Car Park, scrubbed in time and re-tuned.
+"""Chapter 05 companion: the EKF-SLAM run on the Car Park, scrubbed in time and re-tuned (the
+explorer), and the chapter's figures.
 
 The pure function :func:`slam_summary` runs the filter (``slam.runner.run``, about 0.2 s on
 the Car Park) on the data up to a time ``t_end`` (:func:`truncate`) and measures it: the
@@ -17,19 +18,28 @@ import html
 import io
 import math
 
-from ipywidgets import HTML, FloatSlider, Image, SelectionSlider, VBox
+import numpy as np
+from ipywidgets import HTML, FloatSlider, Image, Layout, SelectionSlider, VBox
 from matplotlib.figure import Figure
 
 from .. import _checks
 from ..data.records import Dataset, truncate
-from ..evaluation.summary import run_metrics
-from ..plots.slam import CAR_PARK_LIMITS, plot_true_vs_mapped
+from ..evaluation.summary import pose_trace, run_metrics
+from ..evaluation.trajectory import trajectory_errors
+from ..plots.slam import (CAR_PARK_LIMITS, plot_consistency, plot_correlation,
+                          plot_landmark_zooms, plot_true_vs_mapped)
+from ..plots.style import DPI, FIG_WIDTH, figure
 from ..plots.style import notebook_setup as setup
 from ..slam.config import SlamConfig
 from ..slam.dead_reckoning import initial_pose_from_gps
 from ..slam.runner import run
 
-__all__ = ["setup", "fixed_initial_pose", "slam_summary", "slam_explorer", "GATE_OPTIONS"]
+__all__ = ["setup", "fixed_initial_pose", "slam_summary", "slam_explorer", "GATE_OPTIONS",
+           "consistency_figure", "nees_comparison_figure", "figure5", "landmark_zooms_figure",
+           "correlation_figure"]
+
+#: Size of the explorer's image (inches at plots.style.DPI): shown at its own pixel size.
+EXPLORER_FIGSIZE = (FIG_WIDTH, 5.6)
 
 #: Gate probabilities offered by the explorer's gate slider.
 GATE_OPTIONS = (0.5, 0.9, 0.95, 0.99, 0.999)
@@ -77,21 +87,38 @@ def _line(s: dict) -> str:
     return f"t = {s['t_end']:.1f} s: " + s["metrics"].line()
 
 
-def _render(summary: dict, limits, ellipse_scale: float) -> bytes:
-    """The Figure 5 view of a summary as PNG bytes (a matplotlib Figure, not pyplot: nothing
-    is displayed as a side effect)."""
-    fig = Figure(figsize=(6.0, 7.5), dpi=80)
-    ax = fig.subplots()
-    # the truth up to the same time (the surveyed beacons are all drawn: they are the map
-    # being built), and the car's position now
-    plot_true_vs_mapped(summary["result"], summary["dataset"], ax=ax,
-                        ellipse_scale=ellipse_scale, limits=limits,
+def _draw_summary(fig, summary: dict, limits, ellipse_scale: float) -> None:
+    """The explorer's view of a summary on ``fig``: the Figure 5 map up to ``t_end`` (left),
+    the path's distance to GPS and the pose uncertainty over the same time (right)."""
+    gs = fig.add_gridspec(2, 2, width_ratios=[1, 1.25])
+    ax = fig.add_subplot(gs[:, 0])
+    r, ds = summary["result"], summary["dataset"]
+    plot_true_vs_mapped(r, ds, ax=ax, ellipse_scale=ellipse_scale, limits=limits,
                         title=f"EKF-SLAM up to t = {summary['t_end']:.1f} s")
-    x, y = summary["result"].trajectory[-1, 1:3]
+    x, y = r.trajectory[-1, 1:3]
     ax.plot(x, y, "o", color="k", ms=7, zorder=7)
-    fig.tight_layout()
+    ax_e, ax_p = fig.add_subplot(gs[0, 1]), fig.add_subplot(gs[1, 1])
+    odo = r.odometry_trajectory
+    inside = (ds.gps.t >= odo[0, 0]) & (ds.gps.t <= odo[-1, 0])
+    if inside.any():
+        e = trajectory_errors(odo, ds.gps)
+        ax_e.plot(e.t, e.error, lw=1.0)
+    ax_e.set(ylabel="distance to GPS [m]", title="the path against GPS")
+    t, tr = pose_trace(r)
+    ax_p.semilogy(t, np.sqrt(tr), lw=1.0, color="tab:purple")
+    ax_p.set(xlabel="time [s]", ylabel="√(P_xx + P_yy) [m]", title="the filter's own position uncertainty")
+    for a in (ax_e, ax_p):
+        a.grid(True, alpha=0.3)
+        a.set_xlim(float(ds.odometry.t[0]), float(ds.odometry.t[-1]))
+
+
+def _render(summary: dict, limits, ellipse_scale: float) -> bytes:
+    """:func:`_draw_summary` as PNG bytes of :data:`EXPLORER_FIGSIZE` at ``plots.style.DPI``
+    (a matplotlib Figure, not pyplot: nothing is displayed as a side effect)."""
+    fig = Figure(figsize=EXPLORER_FIGSIZE, dpi=DPI, layout="constrained")
+    _draw_summary(fig, summary, limits, ellipse_scale)
     buf = io.BytesIO()
-    fig.savefig(buf, format="png")
+    fig.savefig(buf, format="png", dpi=DPI)
     return buf.getvalue()
 
 
@@ -140,7 +167,10 @@ def slam_explorer(dataset: Dataset, config: SlamConfig | None = None, *,
         SelectionSlider(options=list(GATE_OPTIONS), value=gate0, description="gate",
                         continuous_update=False),
     ]
-    image = Image(format="png")
+    # shown at its own pixel size (a stretched PNG is blurred), never wider than the page
+    w, h = (round(v * DPI) for v in EXPLORER_FIGSIZE)
+    image = Image(format="png", width=w, height=h,
+                  layout=Layout(width=f"{w}px", max_width="100%", height="auto"))
     text = HTML()
 
     def update(_change=None) -> None:
@@ -159,3 +189,78 @@ def slam_explorer(dataset: Dataset, config: SlamConfig | None = None, *,
     widget = VBox([*sliders, image, text])
     widget.holder = holder
     return widget
+
+
+def _turning_shade(ax, t, turning) -> None:
+    ax.fill_between(t, 0, 1, where=turning, transform=ax.get_xaxis_transform(),
+                    color="tab:orange", alpha=0.12, step="mid", label="turning")
+
+
+def consistency_figure(t_scan, turning, nees, nis, *, title: str = "average pose NEES"):
+    """Average pose NEES (top, titled ``title``) and normalised NIS (bottom) of a
+    Monte-Carlo batch with their bands, the turns shaded."""
+    fig, axs = figure(2, 1, height=6.0, sharex=True)
+    for ax in axs:
+        _turning_shade(ax, t_scan, turning)
+    plot_consistency(nees, ax=axs[0], expected=3.0, title=title)
+    plot_consistency(nis, ax=axs[1], expected=1.0, title="normalised NIS")
+    axs[0].set(ylim=(0, 8), xlabel="")
+    axs[1].set_ylim(0.6, 1.4)
+    return fig
+
+
+def nees_comparison_figure(t_scan, turning, nees_a, nees_b, labels=("Euler", "midpoint")):
+    """Two average-NEES curves on one band (the first's), the turns shaded."""
+    fig, ax = figure(height=3.8)
+    _turning_shade(ax, t_scan, turning)
+    plot_consistency(nees_a, ax=ax, expected=3.0, color="tab:red",
+                     label=f"{labels[0]}: mean {nees_a.mean:.2f}, {100 * nees_a.inside:.0f} % inside")
+    ax.plot(nees_b.t, nees_b.value, "-", lw=0.9, color="tab:green",
+            label=f"{labels[1]}: mean {nees_b.mean:.2f}, {100 * nees_b.inside:.0f} % inside")
+    ax.set(ylim=(0, 8), title=f"average pose NEES: {labels[0]} against {labels[1]}")
+    ax.legend(fontsize=8, loc="upper right", ncol=2)
+    return fig
+
+
+def figure5(result, dataset, *, ellipse_scale: float = 10.0, max_distance: float = 1.0):
+    """The paper's Figure 5 (true and mapped path and beacons, 2-sigma ellipses magnified
+    ``ellipse_scale`` times), and what it never gives: each beacon's distance from its
+    mapped landmark, against the landmark's own 2-sigma radius."""
+    from ..evaluation.map import map_errors
+    fig, (ax0, ax1) = figure(1, 2, height=7.0, width_ratios=[1, 1.1])
+    plot_true_vs_mapped(result, dataset, ax=ax0, ellipse_scale=ellipse_scale,
+                        limits=CAR_PARK_LIMITS, title="Car Park: true and mapped (the paper's Figure 5)")
+    m = map_errors(result.landmarks, dataset.beacons, max_distance=max_distance)
+    order = np.argsort(m.j_true)
+    i, j = m.i_mapped[order], m.j_true[order]
+    err = np.hypot(*(result.landmarks[i] - dataset.beacons[j]).T)
+    sig = np.sqrt(np.linalg.eigvalsh(result.landmark_cov[i])[:, 1])
+    x = np.arange(j.size)
+    ax1.bar(x, 100 * err, color="tab:blue", label="mapped − surveyed")
+    ax1.plot(x, 200 * sig, "k_", ms=14, mew=2, label="2σ of the landmark (largest axis)")
+    ax1.set_xticks(x, [str(v) for v in j])
+    ax1.set(xlabel="surveyed beacon", ylabel="distance [cm]",
+            title=f"map error per beacon: RMSE {100 * m.rmse:.1f} cm")
+    ax1.grid(True, axis="y", alpha=0.3)
+    ax1.legend(loc="upper left")
+    return fig
+
+
+def landmark_zooms_figure(result, beacons, map_err):
+    """:func:`plots.slam.plot_landmark_zooms` of every matched beacon, at full width."""
+    order = np.argsort(map_err.j_true)
+    k = order.size
+    ncols = 8
+    fig, axs = figure(-(-k // ncols), ncols, height=1.45 * -(-k // ncols), squeeze=False)
+    plot_landmark_zooms(result.landmarks, result.landmark_cov, beacons,
+                        map_err.i_mapped[order], map_err.j_true[order], axes=axs)
+    return fig
+
+
+def correlation_figure(runs: dict):
+    """The final state's correlation matrix of each {title: SlamResult}, side by side."""
+    fig, axs = figure(1, len(runs), height=5.2)
+    for ax, (name, r) in zip(np.atleast_1d(axs), runs.items()):
+        plot_correlation(r.covariance, ax=ax, title=f"final state correlation: {name}")
+    return fig
+

@@ -21,11 +21,12 @@ from matplotlib.collections import LineCollection
 from ..data.records import Gps
 from ..evaluation.trajectory import TrajectoryErrors, trajectory_errors
 from ..models.uncertainty import ellipse_curves
+from ..plots.style import FIG_WIDTH, figure, show_widget_figure, widget_figure
 from ..plots.style import notebook_setup as setup
-from ..plots.style import show_widget_figure, widget_figure
 from ..slam.results import SlamResult
 
-__all__ = ["setup", "landmark_first_seen", "run_snapshot", "draw_run",
+__all__ = ["setup", "map_figure", "semi_axis_figure", "gps_errors_figure", "slam_vs_dead_reckoning_figure",
+           "health_figure", "cost_figure", "landmark_first_seen", "run_snapshot", "draw_run",
            "draw_gps_errors", "run_scrubber"]
 
 
@@ -190,10 +191,10 @@ def run_scrubber(result: SlamResult, gps: Gps, *, start: float | None = None, st
                if s["fix"] is None else f"error vs GPS {s['fix']['error']:.2f} m")
         print(f"t = {t} s, scan {s['scan']}: {s['landmarks']} landmarks mapped, position "
               f"sigma {s['sigma_xy']:.2f} m; {fix}")
-        fig, (a1, a2) = widget_figure(2, 1, figsize=(8, 9), gridspec_kw={"height_ratios": [3, 1]})
+        fig, (a1, a2) = widget_figure(1, 2, figsize=(FIG_WIDTH, 5.2), width_ratios=[1, 1.2],
+                                      layout="constrained")
         draw_run(result, gps, float(t), a1, first_seen=first_seen, outliers=outliers)
         draw_gps_errors(errors, a2, t=float(t), outliers=err_outliers)
-        fig.tight_layout()
         show_widget_figure(fig)  # not pyplot: see widget_figure
 
     slider = IntSlider(value=start, min=lo, max=hi, step=step, description="t [s]",
@@ -201,3 +202,91 @@ def run_scrubber(result: SlamResult, gps: Gps, *, start: float | None = None, st
     widget = interactive(draw, t=slider)
     widget.holder = holder
     return widget
+
+
+def map_figure(result: SlamResult, gps: Gps, first_seen, outliers):
+    """The whole run's map with 2-sigma ellipses and the track (:func:`draw_run`)."""
+    fig, ax = figure(height=8.0)
+    draw_run(result, gps, ax=ax, first_seen=first_seen, outliers=outliers)
+    ax.set_title("Victoria Park: EKF-SLAM map (2-sigma ellipses) and track")
+    return fig
+
+
+def semi_axis_figure(first_seen, semi):
+    """Each landmark's largest 2-sigma semi-axis against the time it was first seen."""
+    fig, ax = figure(height=3.2)
+    ax.semilogy(first_seen, semi, ".", ms=4)
+    ax.set(xlabel="time the landmark was first seen [s]", ylabel="2-sigma semi-axis [m]",
+           title="a landmark inherits the car's uncertainty of the moment it was first seen")
+    ax.grid(True, alpha=0.3, which="both")
+    return fig
+
+
+def gps_errors_figure(errors: TrajectoryErrors, outliers, first_seen):
+    """The track's error at every GPS fix (:func:`draw_gps_errors`) and the map's growth."""
+    fig, ax = figure(height=3.8)
+    draw_gps_errors(errors, ax, outliers=outliers)
+    ax2 = ax.twinx()
+    ax2.plot(np.sort(first_seen), np.arange(1, len(first_seen) + 1), color="tab:green", lw=1.5)
+    ax2.set_ylabel("landmarks mapped so far", color="tab:green")
+    ax.set_title("error of the track at every GPS fix (dots; gaps stay gaps), and the growing map")
+    return fig
+
+
+def slam_vs_dead_reckoning_figure(gps: Gps, outliers, dead_reckoned, result: SlamResult,
+                                  dr_errors: TrajectoryErrors, dr_keep,
+                                  errors: TrajectoryErrors, err_outliers):
+    """The tracks of dead reckoning and EKF-SLAM against GPS (left), and their errors at the
+    GPS fixes on a log scale (right); GPS outliers left out."""
+    fig, (a1, a2) = figure(1, 2, height=5.5, width_ratios=[1, 1.3])
+    ok = ~np.asarray(outliers, bool)
+    a1.plot(gps.east[ok], gps.north[ok], ".", ms=2, color="tab:blue", label="GPS")
+    a1.plot(dead_reckoned[:, 1], dead_reckoned[:, 2], "-", lw=0.8, color="tab:red", label="dead reckoning")
+    a1.plot(result.trajectory[:, 1], result.trajectory[:, 2], "-", lw=0.7, color="k", label="EKF-SLAM")
+    a1.set(xlabel="East x [m]", ylabel="North y [m]", aspect="equal", title="the tracks")
+    a1.legend(loc="lower left")
+    a1.grid(True, alpha=0.3)
+    a2.semilogy(dr_errors.t[dr_keep], dr_errors.error[dr_keep], ".", ms=2, color="tab:red",
+                label="dead reckoning")
+    a2.semilogy(errors.t[~err_outliers], errors.error[~err_outliers], ".", ms=2, color="k",
+                label="EKF-SLAM")
+    a2.set(xlabel="t [s]", ylabel="error at GPS fixes [m]", title="error against GPS (log scale)")
+    a2.legend(loc="lower right")
+    a2.grid(True, alpha=0.3, which="both")
+    return fig
+
+
+def health_figure(health: dict, steps):
+    """Asymmetry and smallest eigenvalue of P over the steps, one line per update form."""
+    fig, (a1, a2) = figure(1, 2, height=3.8)
+    for name, hist in health.items():
+        a1.semilogy(steps, hist[:, 0], "o-", ms=3, label=name)
+        a2.plot(steps, hist[:, 1], "o-", ms=3, label=name)
+    a1.set(xlabel="steps", ylabel="max |P - P^T|", title="asymmetry")
+    a2.axhline(0, color="k", lw=0.8)
+    a2.set(xlabel="steps", ylabel="smallest eigenvalue of (P + P^T)/2", title="positive definiteness")
+    for a in (a1, a2):
+        a.grid(True, alpha=0.3)
+        a.legend(fontsize=8)
+    return fig
+
+
+def cost_figure(costs, n_map: int):
+    """Seconds per predict and update of the efficient filter, and per step of the dense
+    one, against the number of landmarks, with slopes 1-3 for reference."""
+    N_all = np.array([row.N for row in costs])
+    dense = [row for row in costs if row.dense is not None]
+    fig, ax = figure(height=4.5)
+    ax.loglog(N_all, [row.efficient.predict for row in costs], "o-", label="efficient: predict")
+    ax.loglog(N_all, [row.efficient.update for row in costs], "s-", label="efficient: update")
+    ax.loglog([row.N for row in dense], [row.dense.step for row in dense], "^-", color="tab:red",
+              label="dense: step")
+    for p, ls in ((1, ":"), (2, "--"), (3, "-.")):
+        ax.loglog(N_all, 2e-4 * (N_all / 300.0) ** p, ls, color="0.5", lw=1, label=f"slope {p}")
+    ax.axvline(n_map, color="tab:green", lw=1)
+    ax.annotate("Victoria Park map", (n_map, 2e-5), rotation=90, color="tab:green", fontsize=8)
+    ax.set(xlabel="landmarks N", ylabel="seconds", title="cost of one step as the map grows")
+    ax.grid(True, alpha=0.3, which="both")
+    ax.legend(loc="upper left", ncol=2)
+    return fig
+

@@ -16,11 +16,11 @@ import numpy as np
 from ipywidgets import SelectionSlider, interactive
 
 from ..ann.evaluation import HiddenSizeGrid, grid_summary
-from ..plots.ann import plot_performance
+from ..plots.ann import plot_landmark_errors, plot_performance
+from ..plots.style import figure, show_widget_figure, widget_figure
 from ..plots.style import notebook_setup as setup
-from ..plots.style import show_widget_figure, widget_figure
 
-__all__ = ["setup", "plot_hidden_grid",
+__all__ = ["setup", "plot_hidden_grid", "loop_mistakes_figure", "landmark_errors_figure",
            "hidden_size_explorer"]
 
 
@@ -72,7 +72,8 @@ def hidden_size_explorer(grid: HiddenSizeGrid, *, hidden: int | None = None, see
         plot_hidden_grid(grid, ax=a1, hidden=hidden, seed=seed)
         a1.set_title(f"{hidden} neurons, seed {seed}: test {s['chrono_rmse']:.3f} m, "
                      f"unseen beacons {s['lbo_rmse']:.3f} m", fontsize=10)
-        fig.tight_layout()
+        if fig.get_layout_engine() is None:   # the course style lays out already
+            fig.tight_layout()
         show_widget_figure(fig)
 
     widget = interactive(
@@ -84,3 +85,26 @@ def hidden_size_explorer(grid: HiddenSizeGrid, *, hidden: int | None = None, see
     widget.holder = holder
     widget.grid = grid
     return widget
+
+
+def loop_mistakes_figure(curves: dict):
+    """The loss per epoch of the reference training loop and of each common mistake
+    ({label: losses}), on the grader's toy problem (log scale)."""
+    fig, ax = figure(height=4.0)
+    for label, losses in curves.items():
+        ax.semilogy(losses, "o-", ms=3, label=label)
+    ax.set(xlabel="epoch", ylabel="loss (as each loop computes it)", ylim=(0.03, 1e4),
+           title="the toy problem, SGD with lr 0.1")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(loc="upper left")
+    return fig
+
+
+def landmark_errors_figure(ts, evaluations: dict):
+    """Single landmark estimates against the truth for each {title: evaluation}: the
+    inverse model's, the network's and the true positions (plots.ann.plot_landmark_errors)."""
+    fig, axs = figure(1, len(evaluations), height=5.2)
+    for ax, (title, ev) in zip(np.atleast_1d(axs), evaluations.items()):
+        predicted = np.concatenate([m.predict(ts.X[sp.test]) for m, sp in zip(ev.models, ev.splits)])
+        plot_landmark_errors(ts.base[ev.index], predicted, ts.target[ev.index], ax=ax, title=title)
+    return fig

@@ -18,18 +18,57 @@ import html
 import io
 import math
 
-from ipywidgets import HTML, Image, SelectionSlider, VBox
+from ipywidgets import HTML, Image, Layout, SelectionSlider, VBox
 from matplotlib.figure import Figure
 
 from ..data.records import Dataset
-from ..paper.study import SCALES, r_scale_sweep
-from ..plots.paper import plot_r_scale
+from ..paper.study import SCALES, Study, r_scale_sweep
+from ..plots.paper import plot_pose_trace, plot_r_scale, plot_transfer
+from ..plots.slam import CAR_PARK_LIMITS, plot_true_vs_mapped
+from ..plots.style import DPI, FIG_WIDTH, figure
 from ..plots.style import notebook_setup as setup
 from ..slam.config import SlamConfig
 
-__all__ = ["setup", "r_scale_explorer"]
+__all__ = ["setup", "pose_trace_figure", "r_scale_figure", "transfer_figure", "figure5_figure",
+           "r_scale_explorer"]
 
-#: Factors k applied to R by the sweep and the explorer's slider (1 = the sensor's R).
+#: Size of the explorer's image (inches at plots.style.DPI): the text column's width.
+EXPLORER_FIGSIZE = (FIG_WIDTH, 4.2)
+
+
+def pose_trace_figure(st: Study):
+    """P_xx + P_yy after every scan for each configuration of the study (section 3)."""
+    fig, ax = figure(height=3.8)
+    plot_pose_trace(st, ax=ax)
+    return fig
+
+
+def r_scale_figure(sweep: dict, reference: dict | None = None, scale: float = 0.3):
+    """The R-scale sweep's three panels (section 3) with ``scale`` highlighted."""
+    return plot_r_scale(sweep, scale, reference)
+
+
+def transfer_figure(transfers: dict):
+    """Map RMSE, plain against ANN filter, for every simulated transfer (section 6)."""
+    fig, ax = figure(height=3.8)
+    plot_transfer(transfers, ax=ax)
+    return fig
+
+
+def figure5_figure(st: Study, dataset: Dataset, seed_index: int = 0,
+                   zoom=((-6.5, 4.5), (-16.0, -8.0))):
+    """The paper's Figure 5 with the ANN run of ``st.seeds[seed_index]`` (ellipses x10) and a
+    zoom with the beacons-only map on top, ellipses at true size (section 5)."""
+    fig, axes = figure(1, 2, height=7.0, width_ratios=(1, 1.1))
+    ann_run = st.results["ann"][seed_index]
+    plot_true_vs_mapped(ann_run, dataset, ax=axes[0], ellipse_scale=10.0, limits=CAR_PARK_LIMITS,
+                        color="tab:red", label="ANN", title="Figure 5 with the ANN (ellipses x10)")
+    plot_true_vs_mapped(ann_run, dataset, ax=axes[1], color="tab:red", label="ANN",
+                        title="zoom: ANN and beacons-only, ellipses at true size")
+    plot_true_vs_mapped(st.results["beacons"], ax=axes[1], color="tab:blue", label="beacons-only",
+                        show_truth=False)
+    axes[1].set(xlim=zoom[0], ylim=zoom[1])
+    return fig
 
 
 def _line(s: dict, reference: dict | None) -> str:
@@ -47,10 +86,10 @@ def _line(s: dict, reference: dict | None) -> str:
 def _render(sweep: dict, scale: float, reference: dict | None) -> bytes:
     """The three panels as PNG bytes (a matplotlib Figure, not pyplot: nothing is shown as a
     side effect)."""
-    fig = Figure(figsize=(13, 4), dpi=80)
+    fig = Figure(figsize=EXPLORER_FIGSIZE, dpi=DPI)
     plot_r_scale(sweep, scale, reference, fig=fig)
     buf = io.BytesIO()
-    fig.savefig(buf, format="png")
+    fig.savefig(buf, format="png", dpi=DPI)
     return buf.getvalue()
 
 
@@ -78,7 +117,9 @@ def r_scale_explorer(dataset: Dataset | None = None, *, sweep: dict | None = Non
     holder: dict = {"sweep": sweep}
     slider = SelectionSlider(options=[(f"{k:g}", k) for k in ks], value=scale,
                              description="R × k", continuous_update=False)
-    image = Image(format="png")
+    w, h = (round(v * DPI) for v in EXPLORER_FIGSIZE)
+    image = Image(format="png", width=w, height=h,
+                  layout=Layout(width=f"{w}px", max_width="100%", height="auto"))
     text = HTML()
 
     def update(_change=None) -> None:

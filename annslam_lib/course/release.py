@@ -80,7 +80,8 @@ def validate(nb, name: str = "notebook", *, instructor: bool = True) -> list[Exe
 
     Raises :class:`ReleaseError` for: duplicate or invalid grade ids, a test cell without
     positive points or that is not code, unbalanced or nested markers, solution regions
-    outside solution cells, hidden tests outside test cells, a solution cell without a
+    outside solution cells, hidden tests outside test cells, a markdown solution cell that
+    is not a grade cell (as nbgrader), a code solution cell without a
     region (nbgrader would replace the whole cell; only checked for ``instructor`` copies:
     in a student version the regions are stubs).
     """
@@ -103,6 +104,12 @@ def validate(nb, name: str = "notebook", *, instructor: bool = True) -> list[Exe
         if gid in seen:
             raise ReleaseError(f"{where}: grade id {gid!r} already used in cell {seen[gid]}")
         seen[gid] = i
+        if cell.cell_type == "markdown" and _is_solution(cell) and not _is_grade(cell):
+            # nbgrader refuses it too (a written answer is a manually graded cell, which
+            # every submission would then wait on): an ungraded exercise's written answer
+            # goes in a <details> block of an ordinary cell instead.
+            raise ReleaseError(f"{where}: markdown solution cell {gid!r} is not a grade cell "
+                               "(nbgrader refuses it); put an ungraded answer in <details>")
         if instructor and _is_solution(cell) and cell.cell_type == "code" and not sol:
             raise ReleaseError(f"{where}: solution cell {gid!r} has no ### BEGIN/END SOLUTION")
         if _is_grade(cell):

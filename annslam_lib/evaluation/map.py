@@ -22,7 +22,7 @@ from .. import _checks
 from scipy.optimize import linear_sum_assignment
 
 
-__all__ = ["rigid_align", "match_landmarks", "MapErrors", "map_errors", "aligned_rmse"]
+__all__ = ["point_rmse", "rigid_align", "match_landmarks", "MapErrors", "map_errors", "aligned_rmse"]
 
 
 def rigid_align(a, b) -> tuple[np.ndarray, np.ndarray]:
@@ -115,6 +115,18 @@ def map_errors(mapped, true, *, max_distance: float = 1.0) -> MapErrors:
                      max=float(err.max()), max_aligned=float(err_al.max()),
                      rotation=float(math.atan2(R[1, 0], R[0, 0])), translation=t,
                      missed=int(true.shape[0] - i.size), spurious=int(rest.size), duplicates=near)
+
+
+def point_rmse(a, b=None) -> float:
+    """Root mean square of the Euclidean lengths of the rows of ``a - b`` (or of ``a``)
+    (K, 2), in the units of the points: the RMSE of K position estimates against their
+    truths (notebook 07). Raises ValueError for no rows, a wrong shape or a non-finite value."""
+    d = np.asarray(a, dtype=float) if b is None else np.asarray(a, float) - np.asarray(b, float)
+    if d.ndim != 2 or d.shape[1] != 2 or d.shape[0] == 0:
+        raise ValueError(f"points must be a non-empty (K, 2) array, got shape {d.shape}")
+    if not np.all(np.isfinite(d)):
+        raise ValueError("points contain NaN or infinite values")
+    return float(np.sqrt(np.mean(np.sum(d * d, axis=1))))
 
 
 def aligned_rmse(a, b) -> float:

@@ -11,7 +11,9 @@ Built Solà style, frame by frame: world -> laser frame (``geometry.to_frame``)
 -> laser polar coordinates, with the Jacobians chained (notebook 03 observation model).
 
 Fast copies (change them together with :func:`observe`, :func:`_to_polar` and
-:func:`polar_to_laser`): :func:`observe_fast` (the filter's update), the innovation
+:func:`polar_to_laser`): :func:`observe_values` and :func:`inverse_observe_values` (the same
+arithmetic without the Jacobians: bitwise the same values, for the landmark network at run
+time), :func:`observe_fast` (the filter's update), the innovation
 covariances of ``slam.efficient.EkfSlam.observation_model`` (closed form from the same
 Jacobians), and ``records.Laser.points`` (calls :func:`polar_to_laser`).
 ``tests/test_ekf_slam.py`` compares the filter with the dense reference, which calls
@@ -24,8 +26,9 @@ import numpy as np
 from .. import _checks
 from .geometry import from_frame, to_frame, wrap_angle
 
-__all__ = ["observe", "inverse_observe", "landmark_from_two_points", "two_point_transform",
-           "polar_to_laser", "observe_fast", "MIN_RANGE"]
+__all__ = ["observe", "inverse_observe", "observe_values", "inverse_observe_values",
+           "landmark_from_two_points", "two_point_transform", "polar_to_laser", "observe_fast",
+           "MIN_RANGE"]
 
 #: Landmarks closer than this to the sensor have no defined bearing.
 MIN_RANGE = 1e-9
@@ -91,6 +94,33 @@ def inverse_observe(pose, z):
     p, Jp_z = _from_polar(z)
     lm, J_pose, J_p = from_frame(pose, p)
     return lm, J_pose, J_p @ Jp_z
+
+
+def observe_values(pose, landmark) -> np.ndarray:
+    """:func:`observe`'s z only (bitwise the same, tested): pose (3,), landmark (N, 2),
+    both already finite float arrays. Used where the Jacobians are not needed, once per
+    scan (the ANN pseudo-measurement), where building them was most of the cost."""
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    dx, dy = landmark[:, 0] - pose[0], landmark[:, 1] - pose[1]
+    x, y = c * dx + s * dy, -s * dx + c * dy
+    r = np.sqrt(x * x + y * y)
+    if r.size and r.min() < MIN_RANGE:
+        raise ValueError("landmark coincides with the sensor position (range < 1e-9 m): "
+                         "bearing undefined")
+    return np.column_stack([r, wrap_angle(np.arctan2(y, x) + np.pi / 2)])
+
+
+def inverse_observe_values(pose, z) -> np.ndarray:
+    """:func:`inverse_observe`'s landmark only (bitwise the same, tested): pose (3,) or
+    (N, 3), z (N, 2), finite float arrays; raises ValueError for a range <= 0."""
+    if z.shape[0] and np.min(z[:, 0]) <= 0:
+        raise ValueError(f"z range must be > 0, got min {np.min(z[:, 0]):.6g}")
+    q = polar_to_laser(z[:, 0], z[:, 1])
+    phi = pose[..., 2]
+    c, s = np.cos(phi), np.sin(phi)
+    rx = c * q[:, 0] - s * q[:, 1]
+    ry = s * q[:, 0] + c * q[:, 1]
+    return np.column_stack([pose[..., 0] + rx, pose[..., 1] + ry])
 
 
 def landmark_from_two_points(p_right, p_left):

@@ -42,6 +42,7 @@ the results table.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import numbers
 import time
@@ -258,6 +259,23 @@ class Transfer:
 
 
 
+@functools.lru_cache(maxsize=32)
+def _plain_sim_run(error: tuple, route: str, seed: int):
+    """Simulated run ``seed`` on ``route`` (beacon layout ``seed``) with the sorted
+    ``error`` items, its beacons-only filter's training set (None without samples) and map
+    errors. Cached: :func:`transfer` asks for the same plain runs again for every network
+    it compares (notebook 08's exercise retrains on the same data), and they are
+    deterministic; the cache holds the small no-raw-laser datasets only."""
+    ds = simulate(seed=seed, route=route, beacon_seed=seed, raw_laser=False, **dict(error))
+    res = run(ds, SlamConfig.for_dataset("simulated"))
+    try:
+        ts = ann.training_set(res, ds)
+    except ValueError:
+        ts = None
+    return ds, ts, map_errors(res.landmarks, ds.beacons)
+
+
+
 def transfer(error: dict | None = None, *, train_route: str = "loop", test_route: str = "figure8",
              seeds=(1, 2, 3, 4, 5), train_config: ann.TrainConfig | None = None) -> Transfer:
     """The simulator experiment of notebook 08: a known systematic sensor ``error``
@@ -275,15 +293,16 @@ def transfer(error: dict | None = None, *, train_route: str = "loop", test_route
     if not seeds:
         raise ValueError("transfer needs at least one test seed")
     cfg = SlamConfig.for_dataset("simulated")
-    train_ds = simulate(seed=0, route=train_route, beacon_seed=0, raw_laser=False, **err)
-    ts = ann.training_set(run(train_ds, cfg), train_ds)
+    key = tuple(sorted(err.items()))
+    _, ts, _ = _plain_sim_run(key, train_route, 0)
+    if ts is None:
+        raise ValueError(f"the training run on {train_route!r} gave no training samples")
     split = ann.chronological_split(ts)
     base_tc = ann.TrainConfig() if train_config is None else train_config
     rows = []
     for k in seeds:
         model = ann.train(ts, split, dataclasses.replace(base_tc, seed=k))
-        ds = simulate(seed=k, route=test_route, beacon_seed=k, raw_laser=False, **err)
-        p = map_errors(run(ds, cfg).landmarks, ds.beacons)
+        ds, _, p = _plain_sim_run(key, test_route, k)
         a = map_errors(run(ds, cfg.replace(landmark_model="ann"),
                                                 landmark_model=model).landmarks, ds.beacons)
         rows.append((p.rmse, a.rmse, p.missed, a.missed, p.spurious, a.spurious))

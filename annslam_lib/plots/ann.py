@@ -46,7 +46,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from .. import ann
-from .style import BEACON_STYLE, axes
+from .style import BEACON_STYLE, FIG_WIDTH, axes
 
 __all__ = ["PART_LABELS", "PART_COLORS", "plot_performance", "plot_error_histogram",
            "plot_regression", "plot_activations", "plot_rmse_comparison",
@@ -73,7 +73,7 @@ def plot_performance(model, ax=None):
     if isinstance(best, bool) or not isinstance(best, numbers.Integral) or not 0 <= best < train.size:
         raise ValueError(f"model.best_epoch must be an epoch of the history (0..{train.size - 1}), "
                          f"got {best!r}")
-    ax = axes(ax)
+    ax = axes(ax, figsize=(FIG_WIDTH, 4.0))
     for p in ann.SPLITS:
         v = np.asarray(hist.get(p, np.full(train.size, np.nan)), dtype=float)
         if v.shape != train.shape:
@@ -118,7 +118,7 @@ def plot_error_histogram(source, ts=None, split=None, *, bins: int = 20, ax=None
     nb = edges.size - 1
     if nb < 1 or not np.all(np.diff(edges) > 0):
         raise ValueError("histogram edges must be increasing, at least two of them")
-    ax = axes(ax)
+    ax = axes(ax, figsize=(FIG_WIDTH, 4.0))
     width = np.diff(edges)
     bottom = np.zeros(nb)
     for p in ann.SPLITS:
@@ -160,7 +160,7 @@ def plot_regression(source, ts=None, split=None, *, kind: str = "position", axes
     reg = _regression_data(source, ts, split, kind)
     parts = (*ann.SPLITS, "all")
     if axes is None:
-        fig, axes = plt.subplots(2, 2, figsize=(8, 7.5))
+        fig, axes = plt.subplots(2, 2, figsize=(FIG_WIDTH, 8.0))
     axes = list(np.ravel(axes))
     if len(axes) != 4:
         raise ValueError(f"axes must be four axes (Training, Validation, Test, All), got {len(axes)}")
@@ -187,7 +187,8 @@ def plot_regression(source, ts=None, split=None, *, kind: str = "position", axes
     fig = axes[0].figure
     if kind in ("position", "correction") and not isinstance(source, dict):
         fig.suptitle(f"Regression ({kind})")
-    fig.tight_layout()
+    if fig.get_layout_engine() is None:   # the course style lays out already
+        fig.tight_layout()
     return fig
 
 
@@ -200,7 +201,7 @@ def plot_activations(axes=None, s_max: float = 3.0):
     if not (isinstance(s_max, numbers.Real) and np.isfinite(s_max) and s_max > 0):
         raise ValueError(f"s_max must be a positive number, got {s_max!r}")
     if axes is None:
-        _, axes = plt.subplots(1, 2, figsize=(10, 3.6))
+        _, axes = plt.subplots(1, 2, figsize=(FIG_WIDTH, 3.6))
     axes = list(np.ravel(axes))
     if len(axes) != 2:
         raise ValueError(f"axes must be two axes (values, derivatives), got {len(axes)}")
@@ -222,7 +223,8 @@ def plot_activations(axes=None, s_max: float = 3.0):
         a.axhline(0, color="k", lw=0.5)
         a.legend(fontsize=8, loc="upper left")
         a.grid(alpha=0.3)
-    a0.figure.tight_layout()
+    if a0.figure.get_layout_engine() is None:   # the course style lays out already
+        a0.figure.tight_layout()
     return a0.figure
 
 
@@ -245,7 +247,7 @@ def plot_rmse_comparison(rows, ax=None):
         base.append(b)
         mean.append(float(a.mean()))
         std.append(float(a.std()))
-    ax = axes(ax, figsize=(1.6 * len(rows) + 3, 4.2))
+    ax = axes(ax, figsize=(FIG_WIDTH, 4.2))
     x = np.arange(len(rows))
     w = 0.38
     bb = ax.bar(x - w / 2, base, w, color="0.7", edgecolor="k", lw=0.5,

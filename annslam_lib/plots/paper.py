@@ -7,6 +7,7 @@ import numpy as np
 
 from ..evaluation.summary import pose_trace
 from ..paper.study import CONFIGURATIONS, Study
+from .style import FIG_WIDTH
 
 __all__ = ["plot_pose_trace", "plot_transfer", "plot_r_scale"]
 
@@ -17,7 +18,7 @@ def plot_pose_trace(st: Study, ax=None, *, configs=("beacons", "natural", "ann",
     import matplotlib.pyplot as plt
 
     if ax is None:
-        _, ax = plt.subplots(figsize=(9, 3.8))
+        _, ax = plt.subplots(figsize=(FIG_WIDTH, 3.8))
     runs = {"beacons": st.results["beacons"], "natural": st.results["natural"],
             "ann": st.results["ann"][0], "control": st.results["control"][0]}
     colors = {"beacons": "tab:blue", "natural": "tab:green", "ann": "tab:red", "control": "0.4"}
@@ -42,7 +43,7 @@ def plot_transfer(transfers: dict, ax=None):
     import matplotlib.pyplot as plt
 
     if ax is None:
-        _, ax = plt.subplots(figsize=(9, 3.8))
+        _, ax = plt.subplots(figsize=(FIG_WIDTH, 3.8))
     names = list(transfers)
     for i, name in enumerate(names):
         tr = transfers[name]
@@ -66,7 +67,7 @@ def plot_r_scale(sweep: dict, scale: float, reference: dict | None = None, fig=N
     if scale not in sweep:
         raise ValueError(f"scale {scale!r} is not in the sweep {tuple(sweep)}")
     if fig is None:
-        fig = plt.figure(figsize=(13, 4))
+        fig = plt.figure(figsize=(FIG_WIDTH, 4.2))
     a0, a1, a2 = fig.subplots(1, 3)
     ks = np.array(sorted(sweep))
     s = sweep[scale]
@@ -108,5 +109,6 @@ def plot_r_scale(sweep: dict, scale: float, reference: dict | None = None, fig=N
         ax.set_xticks(ks, [f"{k:g}" for k in ks], fontsize=7)
         ax.minorticks_off()
         ax.grid(alpha=0.3)
-    fig.tight_layout()
+    if fig.get_layout_engine() is None:      # the course style already lays out (constrained)
+        fig.tight_layout()
     return fig

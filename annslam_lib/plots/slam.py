@@ -17,7 +17,7 @@ import numpy as np
 
 from ..evaluation.consistency import Consistency, correlation_matrix
 from ..models.uncertainty import ellipse_points
-from .style import BEACON_STYLE, axes
+from .style import BEACON_STYLE, FIG_WIDTH, axes
 
 __all__ = ["CAR_PARK_LIMITS", "plot_consistency", "plot_correlation", "true_path",
            "plot_true_vs_mapped", "plot_landmark_zooms"]
@@ -30,7 +30,7 @@ def plot_consistency(stats: Consistency, ax=None, *, expected: float | None = 1.
                      color: str = "tab:blue", label: str | None = None, title: str | None = None):
     """The statistic over time with its band shaded and the expected value dashed
     (``expected``: dof for a NEES average, 1 for NIS / dof; None: not drawn)."""
-    ax = axes(ax, figsize=(9, 3.5))
+    ax = axes(ax, figsize=(FIG_WIDTH, 3.5))
     ax.fill_between(stats.t, stats.lo, stats.hi, color="0.85", step="mid",
                     label=f"{100 * stats.prob:.0f} % band")
     ax.plot(stats.t, stats.value, "-", lw=0.9, color=color,

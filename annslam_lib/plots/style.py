@@ -24,14 +24,15 @@ DPI = 90
 BEACON_STYLE = dict(marker="*", s=140, color="tab:red", edgecolor="k", linewidth=0.5, zorder=5)
 
 
-def widget_figure(nrows: int = 1, ncols: int = 1, *, figsize, **subplots_kw):
+def widget_figure(nrows: int = 1, ncols: int = 1, *, figsize, layout=None, **subplots_kw):
     """A Figure made outside pyplot and its axes (``Figure.subplots(nrows, ncols, **subplots_kw)``),
-    for a widget callback to draw on; show it with :func:`show_widget_figure`.
+    for a widget callback to draw on; show it with :func:`show_widget_figure`. ``layout``:
+    the Figure's layout engine (None: the course style's, constrained).
 
     With JupyterLab 4.6 and ipykernel 7 a kernel subshell thread runs matplotlib-inline's
     ``flush_figures`` while a callback is still drawing, showing and closing every open pyplot
     figure (blank or half-drawn plots, found by tests/test_browser.py); pyplot never sees this one."""
-    fig = Figure(figsize=figsize)
+    fig = Figure(figsize=figsize, layout=layout)
     return fig, fig.subplots(nrows, ncols, **subplots_kw)
 
 

@@ -16,7 +16,8 @@ from .. import _checks
 from ..models.vehicle import Vehicle
 from .config import MOTION_MODELS
 
-__all__ = ["InnovationError", "check_initial", "FilterBackend", "LandmarkModel"]
+__all__ = ["InnovationError", "check_initial", "check_dt", "check_sigmas", "check_z",
+           "check_remove", "FilterBackend", "LandmarkModel"]
 
 
 class InnovationError(ValueError):
@@ -40,6 +41,51 @@ def check_initial(x0, P0, vehicle: Vehicle, motion_model: str) -> tuple[np.ndarr
         raise ValueError("initial covariance P0 must be positive semi-definite")
     _checks.instance("vehicle", vehicle, Vehicle)
     return x0, P0
+
+
+
+# Argument checks of the backends' public methods (both call them, so a wrong argument
+# fails the same way in the efficient filter and the dense reference). Cheap: scalars are
+# compared directly, arrays read once; the run loop calls them every scan.
+
+def check_dt(dt) -> float:
+    """A prediction step: a finite dt >= 0 (s); 0 does nothing. A negative or NaN dt is
+    a clock fault, not a step."""
+    if not (0.0 <= dt < np.inf):                        # NaN fails too
+        raise ValueError(f"predict: dt must be finite and >= 0 s, got {dt!r}")
+    return dt
+
+
+def check_sigmas(name: str, *sigmas) -> None:
+    """Measurement noise standard deviations: finite and > 0 (a zero noise makes S
+    singular on a known state; NaN would spread through P)."""
+    for v in sigmas:
+        if not (0.0 < v < np.inf):
+            raise ValueError(f"{name}: measurement noise sigma must be finite and > 0, got {v!r}")
+
+
+def check_z(name: str, z) -> np.ndarray:
+    """Range-bearing measurements z as a float (n, 2) array: finite, range > 0."""
+    z = np.asarray(z, dtype=float)
+    if z.size % 2 or z.ndim > 2 or (z.ndim == 2 and z.shape[1] != 2):
+        raise ValueError(f"{name}: z must be (n, 2) range-bearing pairs, got shape {z.shape}")
+    z = z.reshape(-1, 2)
+    if z.size and not (np.isfinite(z).all() and z[:, 0].min() > 0.0):
+        raise ValueError(f"{name}: z must be finite with every range > 0")
+    return z
+
+
+def check_remove(idx, n_landmarks: int) -> np.ndarray:
+    """Landmark indices to remove: integers in 0..n_landmarks-1 (a negative index would
+    delete rows of the pose)."""
+    a = np.asarray(idx)
+    if a.size and a.dtype.kind not in "iu":
+        raise TypeError(f"remove: landmark indices must be integers, got dtype {a.dtype}")
+    a = a.astype(np.int64).ravel()
+    if a.size and not (0 <= a.min() and a.max() < n_landmarks):
+        raise ValueError(f"remove: landmark index out of range 0..{n_landmarks - 1}: "
+                         f"{a[(a < 0) | (a >= n_landmarks)].tolist()}")
+    return a
 
 
 

@@ -25,7 +25,8 @@ import numpy as np
 
 from .. import _checks
 from ..models import motion as kinematics
-from .base import InnovationError, check_initial
+from .base import (InnovationError, check_dt, check_initial, check_remove, check_sigmas,
+                   check_z)
 from ..models.geometry import wrap_angle
 from ..models.observation import inverse_observe, observe
 from ..models.vehicle import Vehicle
@@ -97,7 +98,7 @@ class DenseEkfSlam:
         """Full-state prediction with the control row ``u`` of ``models.motion.control_table``
         (``motion.predict``; 'midpoint': evaluated at the mid-step heading);
         process noise dt * Delta B Q_c B^T = (Delta / dt) G Q_c G^T."""
-        if dt <= 0.0:
+        if check_dt(dt) == 0.0:
             return
         v, alpha, _, w, _, q00, q01, q11, span = u
         at = self.x[:3].copy()
@@ -137,8 +138,9 @@ class DenseEkfSlam:
     def innovation_d2(self, z, sigma_range: float, sigma_bearing: float) -> np.ndarray:
         """d2 (n, N) of detections z to every landmark (``slam.base.FilterBackend``):
         :meth:`observation_model` and ``perception.association.mahalanobis_fast``."""
+        check_sigmas("innovation_d2", sigma_range, sigma_bearing)
+        z = check_z("innovation_d2", z)
         zhat, S = self.observation_model(sigma_range, sigma_bearing)
-        z = np.asarray(z, dtype=float)
         if zhat.shape[0] == 0:
             return np.empty((z.shape[0], 0))
         return mahalanobis_fast(z, zhat, S)
@@ -156,7 +158,8 @@ class DenseEkfSlam:
         return nis
 
     def update(self, z, lm, sigma_range: float, sigma_bearing: float):
-        z = np.asarray(z, dtype=float).reshape(-1, 2)
+        check_sigmas("update", sigma_range, sigma_bearing)
+        z = check_z("update", z)
         lm = np.asarray(lm, dtype=np.int64).ravel()
         if lm.size == 0:
             return 0.0, 0
@@ -167,13 +170,18 @@ class DenseEkfSlam:
         return self._kalman(H, nu.ravel(), R), 2 * lm.size
 
     def gps_update(self, xy, sigma_gps: float, gate: float = np.inf):
+        check_sigmas("gps_update", sigma_gps)
+        xy = np.asarray(xy, dtype=float)
+        if xy.shape != (2,) or not np.isfinite(xy).all():
+            raise ValueError(f"gps_update: xy must be a finite (2,) position, got {xy!r}")
         H = np.zeros((2, self.x.size))
         H[0, 0] = H[1, 1] = 1.0
         nis = self._kalman(H, np.asarray(xy, dtype=float) - self.x[:2], sigma_gps**2 * np.eye(2), gate)
         return nis, nis <= gate
 
     def augment(self, z, sigma_range: float, sigma_bearing: float) -> np.ndarray:
-        z = np.asarray(z, dtype=float).reshape(-1, 2)
+        check_sigmas("augment", sigma_range, sigma_bearing)
+        z = check_z("augment", z)
         k, n, N0 = z.shape[0], self.x.size, self.n_landmarks
         if k == 0:
             return np.empty(0, dtype=np.int64)
@@ -190,7 +198,7 @@ class DenseEkfSlam:
         return np.arange(N0, N0 + k)
 
     def remove(self, idx) -> None:
-        idx = np.asarray(idx, dtype=np.int64).ravel()
+        idx = check_remove(idx, self.n_landmarks)
         keep = np.setdiff1d(np.arange(self.x.size), np.concatenate([3 + 2 * idx, 4 + 2 * idx]))
         self.x = self.x[keep]
         self.P = self.P[np.ix_(keep, keep)]

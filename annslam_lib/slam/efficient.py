@@ -60,7 +60,8 @@ from ..models.geometry import wrap_angle, wrap_difference
 from ..models.observation import inverse_observe, observe_fast
 from ..perception.association import mahalanobis
 from ..models.vehicle import Vehicle
-from .base import InnovationError, check_initial
+from .base import (InnovationError, check_dt, check_initial, check_remove, check_sigmas,
+                   check_z)
 
 __all__ = ["EkfSlam", "diag_blocks"]
 
@@ -132,8 +133,9 @@ class EkfSlam:
         """One Euler step of ``motion.predict`` of length ``dt`` with the control row
         ``u`` of :func:`~annslam_lib.models.motion.control_table`, process noise
         dt * Delta B Q_c B^T (scalar code: the vehicle block only; the cross covariance
-        waits for :meth:`flush`). A step of dt <= 0 does nothing."""
-        if dt > 0.0:
+        waits for :meth:`flush`). A step of dt = 0 does nothing; a negative or non-finite
+        dt raises ValueError."""
+        if check_dt(dt) > 0.0:
             self.predict_many(u, 0.0, (dt,), (u,), record=False)
 
     def predict_many(self, u, t: float, times, rows, *, record: bool = True):
@@ -312,8 +314,9 @@ class EkfSlam:
         ``perception.association.mahalanobis_fast`` (the same formulas, equal to rounding),
         in one pass without building zhat and S (the scan's gating is its costliest step
         after the update)."""
+        check_sigmas("innovation_d2", sigma_range, sigma_bearing)
+        z = check_z("innovation_d2", z)
         self.flush()
-        z = np.asarray(z, dtype=float)
         if self.n_landmarks == 0:
             return np.empty((z.shape[0], 0))
         r, bearing, a, b, c = self._model(sigma_range, sigma_bearing)
@@ -329,8 +332,9 @@ class EkfSlam:
     def update(self, z, lm, sigma_range: float, sigma_bearing: float) -> tuple[float, int]:
         """One batch update with observations z (m, 2) of landmarks lm (m,) (indices;
         a landmark may appear twice). Returns (NIS, dof = 2m)."""
+        check_sigmas("update", sigma_range, sigma_bearing)
+        z = check_z("update", z)
         self.flush()
-        z = np.asarray(z, dtype=float).reshape(-1, 2)
         lm_list = lm if type(lm) is list else np.asarray(lm, dtype=np.int64).ravel().tolist()
         m = len(lm_list)
         if m != z.shape[0]:
@@ -370,8 +374,12 @@ class EkfSlam:
     def gps_update(self, xy, sigma_gps: float, gate: float = math.inf) -> tuple[float, bool]:
         """Position fix of the laser point: H = [I2 0 ...]. Rejected (no change) if its NIS
         exceeds ``gate``. Returns (NIS, accepted)."""
+        check_sigmas("gps_update", sigma_gps)
+        xy = np.asarray(xy, dtype=float)
+        if xy.shape != (2,) or not np.isfinite(xy).all():
+            raise ValueError(f"gps_update: xy must be a finite (2,) position, got {xy!r}")
         self.flush()
-        nu = np.asarray(xy, dtype=float) - self.x[:2]
+        nu = xy - self.x[:2]
         nis, _ = self._correct([0, 1], np.eye(2), nu, np.full(2, sigma_gps**2), gate)
         return nis, nis <= gate
 
@@ -426,8 +434,9 @@ class EkfSlam:
     def augment(self, z, sigma_range: float, sigma_bearing: float) -> np.ndarray:
         """Add landmarks for observations z (k, 2) from the current pose
         (``observation.inverse_observe``). Returns their indices."""
+        check_sigmas("augment", sigma_range, sigma_bearing)
+        z = check_z("augment", z)
         self.flush()
-        z = np.asarray(z, dtype=float).reshape(-1, 2)
         k = z.shape[0]
         N0 = self.n_landmarks
         if k == 0:
@@ -455,7 +464,7 @@ class EkfSlam:
     def remove(self, idx) -> None:
         """Delete landmarks ``idx`` (marginalise them out: drop their rows and columns).
         Copied block by block between the removed rows: about one copy of P."""
-        idx = np.unique(np.asarray(idx, dtype=np.int64).ravel())
+        idx = np.unique(check_remove(idx, self.n_landmarks))
         if idx.size == 0:
             return
         self.flush()
