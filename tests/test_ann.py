@@ -213,6 +213,47 @@ def test_save_load_round_trip(quick_model, sim, tmp_path):
         np.testing.assert_array_equal(back.history[k], quick_model.history[k])
 
 
+def _resaved(quick_model, tmp_path, name, **change):
+    path = ann.save(quick_model, tmp_path / f"{name}.pt")
+    d = torch.load(path, weights_only=True)
+    d.update(change)
+    torch.save(d, path)
+    return path
+
+
+def test_load_names_damaged_and_implausible_model_files(quick_model, tmp_path):
+    """Faults that torch.load accepts silently: each is refused, saying what is wrong."""
+    good = ann.save(quick_model, tmp_path / "good.pt")
+    raw = bytearray(good.read_bytes())
+    at = bytes(raw).find(quick_model.theta.numpy().tobytes()[:16])
+    assert at > 0                                     # the weights are stored uncompressed
+    raw[at + 5] ^= 0x10                               # one bit of one weight
+    flipped = tmp_path / "flipped.pt"
+    flipped.write_bytes(bytes(raw))
+    with pytest.raises(ValueError, match="fails its CRC check"):
+        ann.load(flipped)
+    n = quick_model.theta.numel()
+    cases = {
+        "NaN weights": (dict(theta=torch.full((n,), float("nan"), dtype=torch.float64)), "NaN or infinite"),
+        "huge weights": (dict(theta=torch.full((n,), 1e308, dtype=torch.float64)), "not a trained network"),
+        "sigma_range NaN": (dict(sigma_range=float("nan")), "sigma_range = nan"),
+        "sigma_bearing -1": (dict(sigma_bearing=-1.0), "sigma_bearing = -1.0"),
+    }
+    for name, (change, message) in cases.items():
+        with pytest.raises(ValueError, match=message):
+            ann.load(_resaved(quick_model, tmp_path, name.replace(" ", "_"), **change))
+    text = tmp_path / "notes.pt"
+    text.write_text("these are my notes, not a model\n")
+    with pytest.raises(ValueError, match="not a model file") as err:
+        ann.load(text)
+    assert not isinstance(err.value, ann.UnsafeModelFile)        # not "holds objects"
+    truncated = tmp_path / "truncated.pt"
+    truncated.write_bytes(good.read_bytes()[: good.stat().st_size // 2])
+    with pytest.raises(ValueError, match="damaged model file"):
+        ann.load(truncated)
+    assert ann.load(good).sigmas == quick_model.sigmas           # the intact file still loads
+
+
 class _Payload:
     """Unpickling this writes a file: proof that code from the model file ran."""
 

@@ -221,3 +221,102 @@ def test_the_fix_command_in_a_missing_data_error_works_as_printed(car_park, tmp_
     assert out.returncode == 0, out.stderr
     assert "car_park: OK" in out.stdout
     assert (tmp_path / "data" / "acfr_car_park" / "data_set.mat").exists()
+
+
+# ------------------------------------------------------------- hostile or slow mirrors
+
+class _Hostile(http.server.BaseHTTPRequestHandler):
+    """tiny/: a byte every 0.2 s, for 40 s; broken/: 300x the expected size in zeros."""
+
+    def do_GET(self):
+        import time
+
+        self.send_response(200)
+        self.end_headers()
+        try:
+            if "/tiny/" in self.path:
+                for _ in range(200):
+                    self.wfile.write(b"a")
+                    self.wfile.flush()
+                    time.sleep(0.2)
+            else:
+                block = b"\0" * (1 << 16)
+                for _ in range(300 * len(GOOD) // len(block) + 1):
+                    self.wfile.write(block)
+        except (BrokenPipeError, ConnectionResetError):
+            pass
+
+    def log_message(self, *args):
+        pass
+
+
+@pytest.fixture
+def hostile(data, monkeypatch):
+    httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), _Hostile)
+    httpd.daemon_threads = True
+    thread = threading.Thread(target=httpd.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True)
+    thread.start()
+    monkeypatch.setenv("ANNSLAM_DATA_URL", f"http://127.0.0.1:{httpd.server_address[1]}")
+    yield data
+    httpd.shutdown()
+    httpd.server_close()
+
+
+def test_a_trickling_mirror_hits_the_files_deadline(hostile, monkeypatch):
+    import time
+
+    monkeypatch.setattr(fetch, "DEADLINE_BASE_S", 1.0)      # 1 s + 10 kB at 50 kB/s = 1.2 s
+    t0 = time.monotonic()
+    with pytest.raises(DataError, match=r"deadline for this file") as err:
+        fetch.ensure("tiny", progress=False)
+    took = time.monotonic() - t0
+    assert 1.2 <= took < 4.0, took
+    assert "ANNSLAM_DATA_URL" in str(err.value)
+    assert list((hostile / "tiny").iterdir()) == []        # the partial file is gone
+
+
+def test_a_flooding_mirror_is_cut_off_at_the_files_size(hostile):
+    with pytest.raises(DataError, match=r"more than the file's 10500 bytes \(cut off at (\d+)\)") as err:
+        fetch.ensure("broken", progress=False)
+    cut = int(re.search(r"cut off at (\d+)", str(err.value)).group(1))
+    assert cut <= len(GOOD) + fetch.SIZE_SLACK + (1 << 16)   # one read past the limit, not 3 MB
+    assert list((hostile / "broken").iterdir()) == []
+
+
+def test_a_killed_downloads_partial_file_is_removed_by_the_next(data, monkeypatch):
+    import time
+
+    folder = data / "tiny"
+    folder.mkdir(parents=True)
+    orphan, fresh = folder / ".good.bin.k3j2.part", folder / ".good.bin.live.part"
+    orphan.write_bytes(b"half")
+    fresh.write_bytes(b"another download, still running")
+    old = time.time() - fetch.STALE_PART_S - 5
+    os.utime(orphan, (old, old))
+    fetch.ensure("tiny", progress=False)
+    assert sorted(p.name for p in folder.iterdir()) == [".good.bin.live.part", "good.bin"]
+
+
+def test_verify_rehashes_a_flipped_byte_that_kept_size_and_mtime(data):
+    fetch.ensure("tiny", progress=False)
+    p = data / "tiny" / "good.bin"
+    st = p.stat()
+    fetch.path("tiny", "good.bin")                           # cached as verified
+    raw = bytearray(p.read_bytes())
+    raw[100] ^= 0x01
+    p.write_bytes(bytes(raw))
+    os.utime(p, ns=(st.st_atime_ns, st.st_mtime_ns))        # size and mtime as before
+    assert (p.stat().st_size, p.stat().st_mtime_ns) == (st.st_size, st.st_mtime_ns)
+    with pytest.raises(DataError, match="corrupt"):
+        fetch.verify("tiny")
+    with pytest.raises(DataError, match="corrupt"):
+        fetch.path("tiny", "good.bin")                      # the load path sees it too (ctime)
+
+
+def test_an_empty_annslam_data_is_an_error(monkeypatch):
+    monkeypatch.setenv("ANNSLAM_DATA", "")
+    with pytest.raises(DataError, match=r"set but empty.*Unset it"):
+        fetch.data_dir()
+    monkeypatch.setenv("ANNSLAM_DATA", "   ")
+    with pytest.raises(DataError, match="set but empty"):
+        fetch.data_dir()

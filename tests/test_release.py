@@ -231,3 +231,65 @@ def test_nbgrader_generate_assignment_gives_the_same_student_cells(tmp_path, stu
         for i, (a, b) in enumerate(zip(theirs["cells"], ours.cells)):
             src_a = "".join(a["source"]) if isinstance(a["source"], list) else a["source"]
             assert src_a == b.source, f"{p.name} cell {i} differs from nbgrader's"
+
+
+# ------------------------------------------------------------------ what must not leak
+
+def _manual_answer(src, gid="written-a", points=1):
+    """A manually graded written answer (nbgrader: markdown, grade + solution)."""
+    c = new_markdown_cell(src)
+    c.metadata["nbgrader"] = {"grade": True, "grade_id": gid, "locked": False, "points": points,
+                              "schema_version": 3, "solution": True, "task": False}
+    return c
+
+
+@pytest.mark.parametrize("marker", ["### begin solution", "### Begin Solution",
+                                    "### BEGIN  SOLUTION", "### begin hidden tests"])
+def test_a_marker_not_in_capitals_is_refused_not_copied(marker):
+    nb = _toy()
+    nb.cells[2].source = nb.cells[2].source.replace("### BEGIN SOLUTION", marker) \
+        if "solution" in marker.lower() else nb.cells[2].source
+    if "hidden" in marker.lower():
+        nb.cells[3].source = nb.cells[3].source.replace("### BEGIN HIDDEN TESTS", marker)
+    with pytest.raises(ReleaseError, match="not written"):
+        release.student_version(nb, "toy")
+
+
+def test_attachments_and_custom_metadata_of_answers_are_dropped(tmp_path):
+    nb = _toy()
+    answer = _manual_answer("![my answer](attachment:answer.png)\nThe gate is a chi-square quantile.")
+    answer["attachments"] = {"answer.png": {"image/png": "iVBORw0KGgo="}}
+    nb.cells.append(answer)
+    nb.cells[2].metadata["my_course"] = {"answer": "y = 2 * x"}
+    nb.metadata["solutions"] = {"ex-a": "y = 2 * x"}
+    st = release.student_version(nb, "toy")
+    assert "attachments" not in st.cells[-1] and st.cells[-1].source == release.TEXT_STUB
+    assert "my_course" not in st.cells[2].metadata and "solutions" not in st.metadata
+    assert st.cells[2].metadata["nbgrader"] == nb.cells[2].metadata["nbgrader"]
+    assert release.leaks(nb, st) == []
+    # the leak check itself sees each of them in a student copy made carelessly
+    careless = nbformat.from_dict(json.loads(json.dumps(nb)))
+    careless.cells[3].source = careless.cells[3].source.replace("### BEGIN HIDDEN TESTS\n", "")
+    found = "\n".join(release.leaks(nb, careless))
+    for expected in ("'y = 2 * x'", "marker", "attachments ['answer.png']", "metadata ['my_course']",
+                     "notebook metadata ['solutions']", "outputs"):
+        if expected == "outputs":
+            careless.cells[2].outputs = [nbformat.v4.new_output("stream", text="x")]
+            found = "\n".join(release.leaks(nb, careless))
+        assert expected in found, (expected, found)
+
+
+def test_two_notebooks_with_one_name_and_a_non_notebook_are_named(tmp_path):
+    for folder in ("week1", "week2"):
+        (tmp_path / folder).mkdir()
+        nbformat.write(_toy(), tmp_path / folder / "lab.ipynb")
+    with pytest.raises(ReleaseError, match="two notebooks named lab.ipynb"):
+        release.release([tmp_path / "week1" / "lab.ipynb", tmp_path / "week2" / "lab.ipynb"],
+                        tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+    broken = tmp_path / "broken.ipynb"
+    broken.write_text("{ this is not json")
+    with pytest.raises(ReleaseError, match="broken.ipynb: not a readable notebook"):
+        release.release([broken], tmp_path / "out")
+    with pytest.raises(ReleaseError, match="not a readable notebook"):
+        release.exercises(broken)

@@ -370,6 +370,10 @@ def train(train_set: TrainingSet, split: Split, config: TrainConfig | None = Non
         idx = split.part(part)
         if idx.size and (idx.min() < 0 or idx.max() >= n):
             raise ValueError(f"split part {part!r} indexes outside the {n} samples")
+    if split.train.size < 2:
+        raise ValueError(f"the training part has {split.train.size} sample(s): at least 2 are "
+                         "needed (their mean and spread normalise the inputs and outputs); "
+                         "a smaller training set cannot train a network")
     t_start = time.perf_counter()
     cols = np.array([_COL[c] for c in cfg.columns])
     X = train_set.X[:, cols]

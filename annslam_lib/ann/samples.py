@@ -89,8 +89,13 @@ def encode(pose, z, intensity=None, width=None) -> tuple[np.ndarray, np.ndarray]
     ``pose`` (n, 3) or (3,) and measurements ``z`` (n, 2) (module docstring table).
     ``intensity``, ``width`` (n,) default to 0; NaN width (unknown) becomes 0.
     The same function serves the training set and the filter at run time."""
-    z = np.asarray(z, dtype=float).reshape(-1, 2)
+    z = np.asarray(z, dtype=float)
+    if z.ndim > 2 or (z.ndim >= 1 and z.shape[-1] != 2) or z.ndim == 0:
+        raise ValueError(f"z must be (n, 2) range-bearing pairs or one pair (2,), got shape {z.shape}")
+    z = z.reshape(-1, 2)
     n = z.shape[0]
+    if not np.all(np.isfinite(np.asarray(pose, dtype=float))):   # before broadcasting to n = 0
+        raise ValueError("pose and z must be finite")
     pose = np.broadcast_to(np.asarray(pose, dtype=float), (n, 3)) if np.ndim(pose) == 1 \
         else np.asarray(pose, dtype=float)
     if pose.shape != (n, 3):

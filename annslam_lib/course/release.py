@@ -23,13 +23,22 @@ from pathlib import Path
 import nbformat
 
 __all__ = ["ReleaseError", "Exercise", "exercises", "validate", "student_version", "release",
-           "exercise_table", "solution_lines", "hidden_test_lines", "CODE_STUB", "TEXT_STUB"]
+           "leaks", "read_notebook", "exercise_table", "solution_lines", "hidden_test_lines",
+           "CODE_STUB", "TEXT_STUB", "CELL_METADATA", "NOTEBOOK_METADATA"]
 
 CODE_STUB = "# YOUR CODE HERE\nraise NotImplementedError()"  # nbgrader's Python stub
 TEXT_STUB = "YOUR ANSWER HERE"
 BEGIN_SOLUTION, END_SOLUTION = "BEGIN SOLUTION", "END SOLUTION"
 BEGIN_HIDDEN, END_HIDDEN = "BEGIN HIDDEN TESTS", "END HIDDEN TESTS"
 _GRADE_ID = re.compile(r"^[a-zA-Z0-9_\-]+$")  # what nbgrader accepts
+# A marker in any other case: nbgrader matches the capitals only and would copy the
+# solution verbatim, so the course refuses it.
+_ANY_CASE_MARKER = re.compile(r"(begin|end)\s+(solution|hidden\s+tests)", re.I)
+#: Cell and notebook metadata a student version keeps; anything else (a custom key can hold
+#: an answer) is dropped.
+CELL_METADATA = frozenset({"nbgrader", "tags", "deletable", "editable", "collapsed",
+                           "jupyter", "scrolled", "slideshow"})
+NOTEBOOK_METADATA = frozenset({"kernelspec", "language_info"})
 
 
 class ReleaseError(ValueError):
@@ -89,6 +98,12 @@ def validate(nb, name: str = "notebook", *, instructor: bool = True) -> list[Exe
     found = []
     for i, cell in enumerate(nb.cells):
         where = f"{name}, cell {i}"
+        for n, line in enumerate(cell.source.split("\n"), 1):
+            m = _ANY_CASE_MARKER.search(line)
+            if m and m.group(0) not in (BEGIN_SOLUTION, END_SOLUTION, BEGIN_HIDDEN, END_HIDDEN):
+                raise ReleaseError(f"{where}, line {n}: marker {m.group(0)!r} is not written "
+                                   f"'{m.group(0).upper()}' (capitals, one space): nbgrader and "
+                                   "this release would not see it and copy the answer")
         sol = _regions(cell.source, BEGIN_SOLUTION, END_SOLUTION, where)
         hid = _regions(cell.source, BEGIN_HIDDEN, END_HIDDEN, where)
         meta = _meta(cell)
@@ -126,7 +141,7 @@ def validate(nb, name: str = "notebook", *, instructor: bool = True) -> list[Exe
 def exercises(path, *, instructor: bool = True) -> list[Exercise]:
     """The autograded test cells of the notebook at ``path`` (markup validated)."""
     path = Path(path)
-    return validate(nbformat.read(path, as_version=4), path.name, instructor=instructor)
+    return validate(read_notebook(path), path.name, instructor=instructor)
 
 
 def exercise_table(paths) -> str:
@@ -174,16 +189,56 @@ def student_version(nb, name: str = "notebook"):
             cell.source = _replace(cell.source, regions, stub)
         cell.source = _replace(cell.source, _regions(cell.source, BEGIN_HIDDEN, END_HIDDEN,
                                                      where), None)
+        for key in set(cell.metadata) - CELL_METADATA:
+            del cell.metadata[key]             # a custom key may hold the answer
+        if _is_solution(cell) or _is_grade(cell):
+            cell.pop("attachments", None)      # an image of the answer, pasted into the cell
         if cell.cell_type == "code":
             cell.outputs, cell.execution_count = [], None
-            cell.metadata.pop("execution", None)
             if _is_grade(cell) and not _is_solution(cell):
                 _tag_raises(cell)
             elif _is_solution(cell) and re.search(r"^raise NotImplementedError", cell.source,
                                                   re.M):
                 _tag_raises(cell)              # an unindented stub raises when the cell runs
-    nb.metadata.pop("widgets", None)  # saved widget state belongs to the executed copy
+    for key in set(nb.metadata) - NOTEBOOK_METADATA:
+        del nb.metadata[key]                   # widget state, custom keys: not the student's
     return nb
+
+
+def leaks(instructor, student) -> list[str]:
+    """What of the instructor notebook shows in its student version: solution or hidden-test
+    code lines, a marker, an attachment of a solution cell, metadata beyond
+    :data:`CELL_METADATA` / :data:`NOTEBOOK_METADATA`, outputs. Empty when clean.
+    :func:`release` refuses to write a student version with any."""
+    found = []
+    text = "\n".join(c.source for c in student.cells)
+    lines = {s.strip() for s in text.split("\n")}
+    code = (solution_lines(instructor) | hidden_test_lines(instructor)) & lines
+    found += [f"solution or hidden-test line {s!r}" for s in sorted(code)]
+    found += [f"marker {m.group(0)!r}" for m in _ANY_CASE_MARKER.finditer(text)]
+    for i, c in enumerate(student.cells):
+        if c.get("attachments") and (_is_solution(c) or _is_grade(c)):
+            found.append(f"cell {i}: attachments {sorted(c['attachments'])}")
+        extra = set(c.metadata) - CELL_METADATA
+        if extra:
+            found.append(f"cell {i}: metadata {sorted(extra)}")
+        if c.cell_type == "code" and c.get("outputs"):
+            found.append(f"cell {i}: outputs")
+    extra = set(student.metadata) - NOTEBOOK_METADATA
+    if extra:
+        found.append(f"notebook metadata {sorted(extra)}")
+    return found
+
+
+def read_notebook(path):
+    """``nbformat.read`` with a :class:`ReleaseError` naming the file for one that is not a
+    notebook (not JSON, not nbformat)."""
+    path = Path(path)
+    try:
+        return nbformat.read(path, as_version=4)
+    except (ValueError, KeyError, TypeError, AttributeError) as e:  # NotJSONError is a ValueError
+        raise ReleaseError(f"{path}: not a readable notebook ({type(e).__name__}: "
+                           f"{str(e)[:200]})") from e
 
 
 def _tag_raises(cell) -> None:
@@ -237,9 +292,13 @@ def release(paths, out) -> list[Path]:
         raise ReleaseError("no notebooks to release")
     if any(p.parent == out for p in paths):
         raise ReleaseError(f"output folder {out} holds the instructor notebooks: choose another")
-    books, owner = [], {}
+    books, owner, names = [], {}, {}
     for p in paths:
-        nb = nbformat.read(p, as_version=4)
+        if p.name in names:
+            raise ReleaseError(f"two notebooks named {p.name}: {names[p.name]} and {p}; the "
+                               "student versions would overwrite each other in one folder")
+        names[p.name] = p
+        nb = read_notebook(p)
         for ex in validate(nb, p.name):
             if ex.grade_id in owner:
                 raise ReleaseError(f"grade id {ex.grade_id!r} is in both {owner[ex.grade_id]} "
@@ -250,6 +309,10 @@ def release(paths, out) -> list[Path]:
     written = []
     for p, nb in books:
         dest = out / p.name
-        nbformat.write(student_version(nb, p.name), dest)
+        st = student_version(nb, p.name)
+        problems = leaks(nb, st)
+        if problems:
+            raise ReleaseError(f"{p.name}: the student version would show " + "; ".join(problems))
+        nbformat.write(st, dest)
         written.append(dest)
     return written

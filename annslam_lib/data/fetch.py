@@ -10,6 +10,13 @@ or, if ``$ANNSLAM_DATA_URL`` is set, a mirror laid out like the data dir:
 Every file is checked against its sha256 before use; a download goes to a temporary
 file in the target folder and is renamed into place only once its hash matches.
 Every problem raises :class:`DataError`, whose message says how to fix it.
+
+Bounds on a download (a slow or hostile mirror): each read waits at most
+:data:`TIMEOUT_S`; the whole file gets a deadline of :data:`DEADLINE_BASE_S` plus its
+registry size at :data:`MIN_RATE_BPS`; a server that sends more than the registry size
+(+ :data:`SIZE_SLACK`) is cut off. Partial files (``.<name>.<random>.part``) that a killed
+download left behind are removed by the next download of the same file, once nothing has
+written to them for :data:`STALE_PART_S`.
 """
 from __future__ import annotations
 
@@ -21,6 +28,7 @@ import os
 import shlex
 import sys
 import tempfile
+import time
 import urllib.request
 from pathlib import Path
 
@@ -33,9 +41,18 @@ from .registry import DataFile, DatasetEntry
 ENV_DIR = "ANNSLAM_DATA"
 ENV_URL = "ANNSLAM_DATA_URL"
 TIMEOUT_S = 60
+#: A file's download deadline: this many seconds plus its size at MIN_RATE_BPS.
+DEADLINE_BASE_S = 60.0
+MIN_RATE_BPS = 50_000
+#: Bytes a server may send beyond the registry size before the download is cut off.
+SIZE_SLACK = 1 << 16
+#: A partial file untouched this long belongs to no running download.
+STALE_PART_S = 2 * TIMEOUT_S
 
-# path -> (size, mtime_ns) of files whose hash matched: a repeated load does not re-hash.
-_verified: dict[str, tuple[int, int]] = {}
+# path -> stat key of files whose hash matched: a repeated load does not re-hash. The key
+# includes ctime and the inode, which a rewrite changes even when it restores the size and
+# mtime; verify() re-hashes regardless.
+_verified: dict[str, tuple[int, ...]] = {}
 
 
 class DataError(RuntimeError):
@@ -43,8 +60,14 @@ class DataError(RuntimeError):
 
 
 def data_dir() -> Path:
-    """The data directory: ``$ANNSLAM_DATA``, else the per-user cache."""
+    """The data directory: ``$ANNSLAM_DATA``, else the per-user cache. ``ANNSLAM_DATA`` set
+    but empty is an error (an unset variable would be the cache; an empty one is a mistake,
+    e.g. ``ANNSLAM_DATA=$UNSET_VAR``)."""
     env = os.environ.get(ENV_DIR)
+    if env is not None and not env.strip():
+        raise DataError(f"${ENV_DIR} is set but empty. Unset it to use the user cache "
+                        f"({Path(platformdirs.user_cache_dir('annslam')) / 'data'}), or set it "
+                        "to the folder that holds (or will hold) the course's data.")
     return Path(env).expanduser() if env else Path(platformdirs.user_cache_dir("annslam")) / "data"
 
 
@@ -83,10 +106,12 @@ def path(name: str, filename: str, *, progress: bool = True) -> Path:
 def verify(name: str) -> Path:
     """Check every file of dataset ``name`` is present with the right sha256; never downloads.
 
+    Every file is hashed again (not taken from the cache of files already verified).
     Returns the folder; raises :class:`DataError` on the first missing or corrupt file."""
     entry = registry.get(name)
     folder = data_dir() / entry.folder
     for f in entry.files:
+        _verified.pop(str(folder / f.name), None)
         if not _check(entry, f, folder):
             raise _error(entry, f, folder, f"data file {f.name!r} of dataset {entry.name!r} is missing")
     return folder
@@ -122,7 +147,7 @@ def _check(entry: DatasetEntry, f: DataFile, folder: Path) -> bool:
     p = folder / f.name
     try:
         st = p.stat()
-        key = (st.st_size, st.st_mtime_ns)
+        key = (st.st_size, st.st_mtime_ns, st.st_ctime_ns, st.st_ino, st.st_dev)
         if _verified.get(str(p)) == key:
             return True
         got = _sha256(p)
@@ -151,6 +176,18 @@ def _ensure_file(entry: DatasetEntry, f: DataFile, folder: Path, repair: bool, p
     return folder / f.name
 
 
+def _remove_stale_parts(folder: Path, name: str) -> int:
+    """Delete ``.<name>.*.part`` files in ``folder`` untouched for :data:`STALE_PART_S`
+    (left by a killed download); returns how many."""
+    removed, now = 0, time.time()
+    for part in folder.glob(f".{name}.*.part"):
+        with contextlib.suppress(OSError):
+            if now - part.stat().st_mtime > STALE_PART_S:
+                part.unlink()
+                removed += 1
+    return removed
+
+
 def _download(entry: DatasetEntry, f: DataFile, folder: Path, progress: bool) -> None:
     src = url(entry.name, f.name)
     tmp = None
@@ -159,12 +196,26 @@ def _download(entry: DatasetEntry, f: DataFile, folder: Path, progress: bool) ->
         # Respect the mode bits even as root: a read-only shared data dir stays untouched.
         if not (os.access(folder, os.W_OK) and folder.stat().st_mode & 0o222):
             raise PermissionError(errno.EACCES, "directory is read-only", str(folder))
+        _remove_stale_parts(folder, f.name)
         fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{f.name}.", suffix=".part")
         digest = hashlib.sha256()
+        limit = f.size + SIZE_SLACK
+        deadline_s = DEADLINE_BASE_S + f.size / MIN_RATE_BPS
+        t0, got = time.monotonic(), 0
         with (os.fdopen(fd, "wb") as out, urllib.request.urlopen(src, timeout=TIMEOUT_S) as resp,
               tqdm(total=f.size, unit="B", unit_scale=True, desc=f.name, disable=not progress,
                    leave=False) as bar):
-            while chunk := resp.read(1 << 16):
+            read = getattr(resp, "read1", resp.read)     # read1: returns what has arrived
+            while chunk := read(1 << 16):
+                got += len(chunk)
+                if got > limit:
+                    raise ValueError(f"the server sent more than the file's {f.size} bytes "
+                                     f"(cut off at {got}); a wrong file or a broken mirror")
+                if time.monotonic() - t0 > deadline_s:
+                    raise TimeoutError(f"{got} of {f.size} bytes after {deadline_s:.0f} s, the "
+                                       f"deadline for this file (at least {MIN_RATE_BPS // 1000} "
+                                       "kB/s); the mirror is too slow or stalled, try again later "
+                                       f"or set ${ENV_URL} to another")
                 out.write(chunk)
                 digest.update(chunk)
                 bar.update(len(chunk))

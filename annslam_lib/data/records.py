@@ -53,6 +53,10 @@ class Odometry:
     def __post_init__(self) -> None:
         t = _as_1d("odometry.t", self.t)
         _check_time("odometry.t", t)
+        if t.size > 1 and t[-1] == t[0]:
+            raise ValueError(f"odometry.t: all {t.size} samples have the same time "
+                             f"({t[0]:g} s): the odometry clock is not running, so nothing can "
+                             "be integrated (check the odometry file's time column)")
         object.__setattr__(self, "t", t)
         object.__setattr__(self, "speed", _as_1d("odometry.speed", self.speed, t.size))
         object.__setattr__(self, "steering", _as_1d("odometry.steering", self.steering, t.size))

@@ -36,8 +36,10 @@ def rigid_align(a, b) -> tuple[np.ndarray, np.ndarray]:
         raise ValueError(f"rigid alignment needs at least 2 point pairs, got {a.shape[0]}")
     ca, cb = a.mean(axis=0), b.mean(axis=0)
     da, db = a - ca, b - cb
-    if np.max(np.abs(da)) == 0.0:
-        raise ValueError("the points of a all coincide: the rotation is undefined")
+    for name, dd in (("a", da), ("b", db)):
+        if np.max(np.abs(dd)) == 0.0:
+            raise ValueError(f"the points of {name} all coincide: the rotation is undefined "
+                             "(every rotation fits equally well)")
     U, _, Vt = np.linalg.svd(da.T @ db)
     d = np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0
     R = Vt.T @ np.diag([1.0, d]) @ U.T
@@ -121,12 +123,25 @@ def point_rmse(a, b=None) -> float:
     """Root mean square of the Euclidean lengths of the rows of ``a - b`` (or of ``a``)
     (K, 2), in the units of the points: the RMSE of K position estimates against their
     truths (notebook 07). Raises ValueError for no rows, a wrong shape or a non-finite value."""
-    d = np.asarray(a, dtype=float) if b is None else np.asarray(a, float) - np.asarray(b, float)
-    if d.ndim != 2 or d.shape[1] != 2 or d.shape[0] == 0:
-        raise ValueError(f"points must be a non-empty (K, 2) array, got shape {d.shape}")
-    if not np.all(np.isfinite(d)):
-        raise ValueError("points contain NaN or infinite values")
-    return float(np.sqrt(np.mean(np.sum(d * d, axis=1))))
+    a = np.asarray(a, dtype=float)
+    pairs = [("a", a)] if b is None else [("a", a), ("b", np.asarray(b, dtype=float))]
+    for name, v in pairs:
+        if v.ndim != 2 or v.shape[1] != 2 or v.shape[0] == 0:
+            raise ValueError(f"points {name} must be a non-empty (K, 2) array, got shape {v.shape}")
+        if not np.all(np.isfinite(v)):
+            raise ValueError(f"points {name} contain NaN or infinite values")
+    if b is not None and pairs[1][1].shape != a.shape:
+        raise ValueError(f"a and b must pair up point by point, got shapes {a.shape} and "
+                         f"{pairs[1][1].shape}")
+    d = a if b is None else a - pairs[1][1]
+    if not np.all(np.isfinite(d)):                  # a difference beyond the float range
+        s = np.max(np.abs(d[np.isfinite(d)]), initial=1.0)
+        raise ValueError(f"the differences of a and b overflow (beyond {s:.3g})")
+    m = np.max(np.abs(d), initial=0.0)
+    if 1e-150 < m < 1e150 or m == 0.0:
+        return float(np.sqrt(np.mean(np.sum(d * d, axis=1))))
+    d = d / m                                       # scaled: d * d would over- or underflow
+    return float(m * np.sqrt(np.mean(np.sum(d * d, axis=1))))
 
 
 def aligned_rmse(a, b) -> float:
@@ -136,5 +151,4 @@ def aligned_rmse(a, b) -> float:
     exercise 8.2). Raises ValueError for fewer than 2 pairs."""
     a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
     R, t = rigid_align(a, b)
-    d = a @ R.T + t - b
-    return float(np.sqrt(np.mean(np.sum(d * d, axis=1))))
+    return point_rmse(a @ R.T + t, b)

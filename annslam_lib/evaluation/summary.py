@@ -23,7 +23,7 @@ import numpy as np
 
 from .. import _checks
 from ..data.records import Dataset
-from .map import MapErrors, map_errors, match_landmarks
+from .map import MapErrors, map_errors, match_landmarks, point_rmse
 from .trajectory import trajectory_errors
 
 __all__ = ["METRICS", "RunMetrics", "run_metrics", "pose_trace", "nis_per_dof",
@@ -109,8 +109,7 @@ def heldout_map_rmse(result, beacons, held_out, max_distance: float = 1.0) -> fl
     sel = np.isin(j, np.asarray(held_out))
     if not sel.any():
         return math.nan
-    d = result.landmarks[i[sel]] - beacons[j[sel]]
-    return float(np.sqrt(np.mean(np.sum(d * d, axis=1))))
+    return point_rmse(result.landmarks[i[sel]], beacons[j[sel]])
 
 
 def _traj_rmse(traj, gps) -> float:

@@ -52,6 +52,7 @@ def axle_speed(encoder_speed, steering, vehicle: Vehicle):
     veh = _checks.instance("vehicle", vehicle, Vehicle)
     v_e = _checks.array("encoder_speed", encoder_speed)
     alpha = _steering("steering", _checks.array("steering", steering))
+    _checks.broadcast(encoder_speed=v_e.shape, steering=alpha.shape)
     v_e, alpha = np.broadcast_arrays(v_e, alpha)
     t = np.tan(alpha)
     d = 1.0 - t * veh.H / veh.L

@@ -37,10 +37,16 @@ MIN_RANGE = 1e-9
 def _to_polar(p):
     """Laser-frame point (x forward, y left) -> (range, laser bearing) and Jacobian."""
     x, y = p[..., 0], p[..., 1]
-    q = x * x + y * y
-    r = np.sqrt(q)
+    with np.errstate(over="ignore"):
+        q = x * x + y * y
+    if np.all(np.isfinite(q)):
+        r = np.sqrt(q)
+        J = np.stack([np.stack([x / r, y / r], -1), np.stack([-y / q, x / q], -1)], -2)
+    else:                     # |p| beyond 1e154: x*x overflows, hypot and (x / r) / r do not
+        r = np.hypot(x, y)
+        ux, uy = x / r, y / r
+        J = np.stack([np.stack([ux, uy], -1), np.stack([-uy / r, ux / r], -1)], -2)
     z = np.stack([r, wrap_angle(np.arctan2(y, x) + np.pi / 2)], -1)
-    J = np.stack([np.stack([x / r, y / r], -1), np.stack([-y / q, x / q], -1)], -2)
     return z, J
 
 
@@ -72,6 +78,7 @@ def observe(pose, landmark):
     """
     pose = _checks.array("pose", pose, (3,))
     landmark = _checks.array("landmark", landmark, (2,))
+    _checks.broadcast(pose=pose.shape[:-1], landmark=landmark.shape[:-1])
     p, Jp_pose, Jp_lm = to_frame(pose, landmark)
     if np.any(np.hypot(p[..., 0], p[..., 1]) < MIN_RANGE):
         raise ValueError("landmark coincides with the sensor position (range < 1e-9 m): "
@@ -89,6 +96,7 @@ def inverse_observe(pose, z):
     """
     pose = _checks.array("pose", pose, (3,))
     z = _checks.array("z", z, (2,))
+    _checks.broadcast(pose=pose.shape[:-1], z=z.shape[:-1])
     if np.any(z[..., 0] <= 0):
         raise ValueError(f"z range must be > 0, got min {np.min(z[..., 0]):.6g}")
     p, Jp_z = _from_polar(z)
@@ -103,7 +111,10 @@ def observe_values(pose, landmark) -> np.ndarray:
     c, s = np.cos(pose[2]), np.sin(pose[2])
     dx, dy = landmark[:, 0] - pose[0], landmark[:, 1] - pose[1]
     x, y = c * dx + s * dy, -s * dx + c * dy
-    r = np.sqrt(x * x + y * y)
+    with np.errstate(over="ignore"):
+        r = np.sqrt(x * x + y * y)
+    if not np.all(np.isfinite(r)):                   # as _to_polar: beyond 1e154
+        r = np.hypot(x, y)
     if r.size and r.min() < MIN_RANGE:
         raise ValueError("landmark coincides with the sensor position (range < 1e-9 m): "
                          "bearing undefined")

@@ -54,10 +54,12 @@ def mahalanobis(z, zhat, S) -> np.ndarray:
     d2[i, j] = nu^T S_j^-1 nu, nu = z_i - zhat_j with the bearing difference wrapped to
     (-pi, pi].
 
-    Vectorised with the explicit inverse of a symmetric 2 x 2 matrix
-    [[a, b], [b, c]]^-1 = [[c, -b], [-b, a]] / (a c - b^2). Raises ValueError naming the
-    landmark index if an S_j is not symmetric or not positive definite (a c - b^2 must
-    exceed 1e-12 a c: a singular S has no Mahalanobis distance).
+    Vectorised with the Cholesky factor of each symmetric 2 x 2 matrix [[a, b], [b, c]]
+    = L L^T, L = [[l11, 0], [l21, l22]], l11 = sqrt(a), l21 = b / l11, l22^2 = c - l21^2, so
+    d2 = |L^-1 nu|^2 (no determinant: a c overflows or underflows at scales such as 1e200 I
+    or 1e-170 I, which are valid covariances). Raises ValueError naming the landmark index
+    if an S_j is not symmetric or not positive definite (l22^2 must exceed 1e-12 c: the
+    same test as a c - b^2 > 1e-12 a c; a singular S has no Mahalanobis distance).
     """
     z = _checks.array("z", z, (2,))
     zhat = _checks.array("zhat", zhat, (2,))
@@ -73,15 +75,21 @@ def mahalanobis(z, zhat, S) -> np.ndarray:
         raise ValueError(f"innovation covariance S of landmark {j} is not symmetric "
                          f"(S[0,1] = {b[j]:.6g}, S[1,0] = {b2[j]:.6g})")
     b = 0.5 * (b + b2)
-    det = a * c - b * b
-    bad = np.flatnonzero(~((a > 0) & (c > 0) & (det > 1e-12 * a * c)))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        l11 = np.sqrt(a)
+        l21 = b / l11
+        l22sq = c - l21 * l21
+    bad = np.flatnonzero(~((a > 0) & (c > 0) & (l22sq > 1e-12 * c) & np.isfinite(l22sq)))
     if bad.size:
         j = int(bad[0])
         raise ValueError(f"innovation covariance S of landmark {j} is not positive definite "
-                         f"(diagonal {a[j]:.6g}, {c[j]:.6g}; determinant {det[j]:.6g})")
+                         f"(diagonal {a[j]:.6g}, {c[j]:.6g}; off-diagonal {b[j]:.6g})")
+    l22 = np.sqrt(l22sq)
     nu_r = z[:, None, 0] - zhat[None, :, 0]
     nu_b = wrap_angle(z[:, None, 1] - zhat[None, :, 1])
-    return (c * nu_r * nu_r - 2.0 * b * nu_r * nu_b + a * nu_b * nu_b) / det
+    e1 = nu_r / l11
+    e2 = (nu_b - l21 * e1) / l22
+    return e1 * e1 + e2 * e2
 
 
 def associate(d2, gate: float = GATE, new_landmark: float = NEW_LANDMARK) -> np.ndarray:

@@ -47,6 +47,7 @@ import numpy as np
 
 from .. import ann
 from .style import BEACON_STYLE, FIG_WIDTH, axes
+from ..evaluation.map import point_rmse
 
 __all__ = ["PART_LABELS", "PART_COLORS", "plot_performance", "plot_error_histogram",
            "plot_regression", "plot_activations", "plot_rmse_comparison",
@@ -281,7 +282,7 @@ def plot_landmark_errors(base, predicted, target, ax=None, title: str = ""):
                          f"{predicted.shape} and {target.shape}")
     ax = axes(ax, figsize=(5.5, 5.5))
     eb, ep = base - target, predicted - target
-    rms = [float(np.sqrt(np.mean(np.sum(e ** 2, axis=1)))) for e in (eb, ep)]
+    rms = [point_rmse(e) for e in (eb, ep)]
     ax.plot(eb[:, 0], eb[:, 1], ".", color="0.55", ms=3, gid="base",
             label=f"inverse model g(prior, z): RMSE {rms[0]:.3f} m")
     ax.plot(ep[:, 0], ep[:, 1], ".", color="tab:blue", ms=3, gid="predicted", zorder=6,
