@@ -112,6 +112,11 @@ def test_explorer_follows_the_sliders(grid, monkeypatch):
     val = [ln for ln in perf.lines if ln.get_gid() == "mse_val"][0]
     np.testing.assert_array_equal(val.get_ydata(), g.models[(4, 2)].history["val"])
     assert s["best_val_mse"] == min(val.get_ydata())
+    # the printed readout says the same numbers
+    text = w.holder["text"]
+    assert text.startswith(f"4 hidden neurons ({g.n_params[1]} weights), seed 2: best epoch "
+                           f"{g.models[(4, 2)].best_epoch} of {g.models[(4, 2)].epochs}")
+    assert f"unseen beacons {g.lbo[1, 1]:.4f} m" in text
 
 
 def test_bad_input(ts, grid):

@@ -99,3 +99,18 @@ def test_sliders_redraw_only_on_release(explorer):
     sliders = [c for c in explorer.children if hasattr(c, "continuous_update")]
     assert {s.description.split()[0] for s in sliders} == {"speed", "steer", "dt"}
     assert not any(s.continuous_update for s in sliders)
+
+
+def test_kinematics_explorer_prints_the_readout_of_its_summary(capsys):
+    from annslam_lib.chapters import ch01_kinematics as ch01
+    from annslam_lib.models.vehicle import ACFR_UTE as V
+    w = ch01.kinematics_explorer(V, speed=2.0, steering=0.3, dt=0.2)
+    s = w.holder["summary"]
+    line = w.holder["text"]
+    assert line == ch01.kinematics_readout(s) and line in capsys.readouterr().out
+    # the numbers it shows, against the summary's own
+    assert f"{s['steps']} Euler steps of 0.200 s" in line
+    assert f"rear-axle radius {s['radius_axle']:.2f} m" in line
+    assert f"laser {100 * s['error_laser']:.1f} cm" in line
+    w.children[1].value = 0.0                          # straight ahead
+    assert "straight ahead" in w.holder["text"] and "rear axle 0.0 cm" in w.holder["text"]

@@ -20,7 +20,8 @@ from ..models.vehicle import ACFR_UTE, Vehicle
 from ..plots.style import FIG_WIDTH, figure, show_widget_figure, widget_figure
 from ..plots.style import notebook_setup as setup
 
-__all__ = ["setup", "circumradius", "arc_vs_euler", "plot_arc_vs_euler", "kinematics_explorer",
+__all__ = ["setup", "circumradius", "arc_vs_euler", "plot_arc_vs_euler", "kinematics_readout",
+           "kinematics_explorer",
            "plot_turning_geometry", "plot_paths", "plot_errors", "turning_geometry_figure",
            "euler_error_figure", "dead_reckoning_figure", "heading_sensitivity_figure",
            "heading_drift_figure"]
@@ -108,6 +109,8 @@ def kinematics_explorer(vehicle: Vehicle = ACFR_UTE, *, speed: float = 2.0,
     def draw(speed: float, steering: float, dt: float) -> None:
         s = arc_vs_euler(speed, steering, dt, vehicle, horizon=horizon)
         holder["summary"] = s
+        holder["text"] = kinematics_readout(s)
+        print(holder["text"])
         fig, ax = widget_figure(figsize=(6, 6))  # not pyplot: see widget_figure
         plot_arc_vs_euler(s, ax)
         r = s["radius_axle"]
@@ -125,6 +128,15 @@ def kinematics_explorer(vehicle: Vehicle = ACFR_UTE, *, speed: float = 2.0,
     widget = interactive(draw, **sliders)
     widget.holder = holder
     return widget
+
+
+def kinematics_readout(s: dict) -> str:
+    """The explorer's line for an :func:`arc_vs_euler` summary: steps, radius, Euler errors."""
+    r = s["radius_axle"]
+    radius = f"rear-axle radius {r:.2f} m" if math.isfinite(r) else "straight ahead"
+    return (f"{s['steps']} Euler steps of {s['dt']:.3f} s over {s['horizon']:.2f} s; {radius}; "
+            f"Euler end-point error: laser {100 * s['error_laser']:.1f} cm, rear axle "
+            f"{100 * s['error_axle']:.1f} cm")
 
 
 def plot_turning_geometry(vehicle: Vehicle = ACFR_UTE, steering: float = 0.35, ax=None):

@@ -138,7 +138,8 @@ def beacon_scrubber(ds: Dataset, *, config: BeaconConfig | None = None, start: i
             if np.isfinite(dr))
         print(f"scan {k}: {s['beacons']} beacons at "
               + ", ".join(f"({r:.2f} m, {math.degrees(b):.1f} deg)" for r, b in s["z"]) + res)
-        fig, ax = widget_figure(figsize=(7, 5))  # not pyplot: see widget_figure
+        # Taller than wide (equal aspect, more to the sides than ahead): 7 in tall to be read.
+        fig, ax = widget_figure(figsize=(9, 7))  # not pyplot: see widget_figure
         draw_beacon_scan(ds, s, ax, max_range=max_range)
         show_widget_figure(fig)
 

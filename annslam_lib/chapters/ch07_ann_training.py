@@ -67,6 +67,11 @@ def hidden_size_explorer(grid: HiddenSizeGrid, *, hidden: int | None = None, see
 
     def draw(hidden: int, seed: int) -> None:
         holder["summary"] = s = grid_summary(grid, hidden, seed)
+        holder["text"] = (f"{hidden} hidden neurons ({s['n_params']} weights), seed {seed}: best "
+                          f"epoch {s['best_epoch']} of {s['epochs']}; chronological test RMSE "
+                          f"{s['chrono_rmse']:.4f} m, unseen beacons {s['lbo_rmse']:.4f} m "
+                          f"(inverse model {s['chrono_base']:.4f} / {s['lbo_base']:.4f} m)")
+        print(holder["text"])
         fig, (a0, a1) = widget_figure(1, 2, figsize=(12, 4.2))  # not pyplot: see widget_figure
         plot_performance(grid.models[(hidden, seed)], ax=a0)
         plot_hidden_grid(grid, ax=a1, hidden=hidden, seed=seed)

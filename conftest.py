@@ -1,0 +1,76 @@
+"""Stored figures are part of nbval's comparison.
+
+nbval compares text outputs and skips ``image/png`` (without nbdime), so a figure could
+change silently while every printed number stays the same. This hook extends its comparison
+of each cell (not the ones marked ``# NBVAL_IGNORE_OUTPUT``, which nbval does not compare at
+all): the cell must produce as many PNG figures as are stored, each of the same size, and
+differing in at most FIGURE_PIXEL_TOLERANCE of its pixels by more than FIGURE_LEVEL_TOLERANCE
+in any channel (anti-aliasing noise passes; a moved curve, a changed label or colour fails).
+``tests/test_figure_regression.py`` runs it end to end on a small notebook.
+"""
+from __future__ import annotations
+
+import base64
+import io
+
+FIGURE_PIXEL_TOLERANCE = 5e-4        # fraction of the pixels
+FIGURE_LEVEL_TOLERANCE = 0.1         # of the 0..1 channel range
+
+
+def png_difference(stored_b64: str, new_b64: str) -> str | None:
+    """None if the two base64 PNGs agree within the tolerances, else what differs."""
+    import matplotlib.image
+    import numpy as np
+
+    a = matplotlib.image.imread(io.BytesIO(base64.b64decode(stored_b64)))[..., :3]
+    b = matplotlib.image.imread(io.BytesIO(base64.b64decode(new_b64)))[..., :3]
+    if a.shape != b.shape:
+        return f"size {b.shape[1]} x {b.shape[0]} px, stored {a.shape[1]} x {a.shape[0]} px"
+    off = np.abs(a - b).max(axis=2) > FIGURE_LEVEL_TOLERANCE
+    frac = float(off.mean())
+    if frac > FIGURE_PIXEL_TOLERANCE:
+        rows, cols = np.nonzero(off)
+        return (f"{100 * frac:.2f} % of the pixels differ (tolerance "
+                f"{100 * FIGURE_PIXEL_TOLERANCE:.2f} %), within x {cols.min()}-{cols.max()}, "
+                f"y {rows.min()}-{rows.max()} px")
+    return None
+
+
+def _pngs(outputs) -> list[str]:
+    found = []
+    for o in outputs:
+        data = o.get("data", {}) if hasattr(o, "get") else {}
+        png = data.get("image/png")
+        if png:
+            found.append(png if isinstance(png, str) else "".join(png))
+    return found
+
+
+def pytest_configure(config):
+    try:
+        from nbval.plugin import IPyNbCell
+    except ImportError:            # nbval not installed: nothing to extend
+        return
+    if getattr(IPyNbCell, "_annslam_figures", False):
+        return
+    compare_text = IPyNbCell.compare_outputs
+
+    def compare_outputs(self, test, ref, skip_compare=None):
+        if not compare_text(self, test, ref, skip_compare):
+            return False
+        new, stored = _pngs(test), _pngs(ref)
+        if len(new) != len(stored):
+            self.comparison_traceback.append(
+                f"the cell drew {len(new)} figure(s), {len(stored)} stored")
+            return False
+        for k, (s, n) in enumerate(zip(stored, new)):
+            problem = png_difference(s, n)
+            if problem:
+                self.comparison_traceback.append(
+                    f"figure {k + 1} of the cell changed: {problem}. If the change is meant, "
+                    "refresh the notebook (./course.sh refresh) and look at the new figure.")
+                return False
+        return True
+
+    IPyNbCell.compare_outputs = compare_outputs
+    IPyNbCell._annslam_figures = True
