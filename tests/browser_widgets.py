@@ -1,6 +1,9 @@
-"""Every widget of chapters 00-08 in a real browser: JupyterLab + headless Chromium.
+"""Every widget of chapters 01-08 in a real browser: JupyterLab + headless Chromium (chapter
+00's scan scrubber has its own, deeper test: tests/test_browser.py). The tests are
+tests/test_browser_widgets_0104.py and tests/test_browser_widgets_0508.py (two files, so that
+the two test workers share them); this module holds what they run.
 
-One JupyterLab serves stripped copies of the nine notebooks. For each notebook: Run All
+Each file's JupyterLab serves stripped copies of its notebooks. For each notebook: Run All
 Cells (it must reach the last cell), then for each of its widgets: press ArrowRight on its
 first slider, as a student would, and check that
 
@@ -42,8 +45,6 @@ def _ch(n):
 
 # (notebook, the widget call exactly as its cell has it, the same widget built here or None)
 WIDGETS = [
-    ("00_course_map", "chapter.scan_scrubber(car, start=150)",
-     lambda car: _ch(0).scan_scrubber(car, start=150)),
     ("01_kinematics", "chapter.kinematics_explorer(V, speed=2.0, steering=0.3, dt=0.2)",
      lambda car: _ch(1).kinematics_explorer(ACFR_UTE, speed=2.0, steering=0.3, dt=0.2)),
     ("02_laser_offset", "chapter.offset_explorer(car)", lambda car: _ch(2).offset_explorer(car)),
@@ -60,7 +61,6 @@ WIDGETS = [
     ("08_ann_slam_verdict", "chapter.r_scale_explorer(sweep=sweep, reference=ref, scale=1.0)",
      None),
 ]
-NOTEBOOKS = list(dict.fromkeys(w[0] for w in WIDGETS))
 
 RUN_STATE_JS = """() => {
   const p = [...document.querySelectorAll('.jp-Notebook .jp-CodeCell .jp-InputPrompt')]
@@ -89,6 +89,11 @@ WIDGET_STATE_JS = """([i, old]) => {
 }"""
 
 
+def notebooks(first: int, last: int) -> list[str]:
+    """The notebooks with widgets among chapters first..last."""
+    return list(dict.fromkeys(w[0] for w in WIDGETS if first <= int(w[0][:2]) <= last))
+
+
 @pytest.fixture(scope="module")
 def chromium():
     reason = why_no_browser()
@@ -98,9 +103,9 @@ def chromium():
 
 
 @pytest.fixture(scope="module")
-def lab(chromium, car_park, victoria_park, tmp_path_factory):
+def lab(chromium, car_park, victoria_park, tmp_path_factory, request):
     work = tmp_path_factory.mktemp("lab-widgets")
-    for stem in NOTEBOOKS:
+    for stem in request.module.NOTEBOOKS:
         serve_copy(REPO / "notebooks" / f"{stem}.ipynb", work / "notebooks")
     server = start_lab(work / "notebooks", work)
     yield server
@@ -156,8 +161,9 @@ def _pre_texts(text: str) -> str:
                      if line.strip() and not _NOT_TEXT.match(line.strip()))
 
 
-@pytest.mark.parametrize("stem", NOTEBOOKS)
-def test_every_widget_answers_its_slider_in_jupyterlab(stem, lab, browser, car_park):
+def check_widgets(stem, lab, browser, car_park):
+    """Run All of notebook ``stem`` in the browser, then move and check each of its widgets
+    (module docstring)."""
     import nbformat
 
     nb = nbformat.read(REPO / "notebooks" / f"{stem}.ipynb", as_version=4)

@@ -1,0 +1,11 @@
+"""The widgets of chapters 01-04 driven in JupyterLab + headless Chromium: see
+tests/browser_widgets.py for what is checked."""
+import pytest
+from browser_widgets import browser, check_widgets, chromium, lab, notebooks  # noqa: F401
+
+NOTEBOOKS = notebooks(1, 4)
+
+
+@pytest.mark.parametrize("stem", NOTEBOOKS)
+def test_every_widget_answers_its_slider_in_jupyterlab(stem, lab, browser, car_park):  # noqa: F811
+    check_widgets(stem, lab, browser, car_park)
