@@ -230,6 +230,10 @@ def test_nbgrader_generate_assignment_gives_the_same_student_cells(tmp_path, stu
         assert len(theirs["cells"]) == len(ours.cells)
         for i, (a, b) in enumerate(zip(theirs["cells"], ours.cells)):
             src_a = "".join(a["source"]) if isinstance(a["source"], list) else a["source"]
+            if release.ANSWER_TAG in a.get("metadata", {}).get("tags", []):
+                # the one documented difference: nbgrader keeps a tagged written answer
+                assert b.source == release.ANSWER_STUB and src_a != b.source
+                continue
             assert src_a == b.source, f"{p.name} cell {i} differs from nbgrader's"
 
 
@@ -293,3 +297,29 @@ def test_two_notebooks_with_one_name_and_a_non_notebook_are_named(tmp_path):
         release.release([broken], tmp_path / "out")
     with pytest.raises(ReleaseError, match="not a readable notebook"):
         release.exercises(broken)
+
+
+def test_a_tagged_written_answer_is_stubbed_and_a_copied_one_is_a_leak():
+    nb = _toy()
+    answer = new_markdown_cell("<details><summary>Answer</summary>\n\nThe gate is a chi-square "
+                               "quantile.\n\n</details>")
+    answer.metadata["tags"] = [release.ANSWER_TAG]
+    nb.cells.append(answer)
+    st = release.student_version(nb, "toy")
+    assert st.cells[-1].source == release.ANSWER_STUB
+    assert release.leaks(nb, st) == []
+    careless = nbformat.from_dict(json.loads(json.dumps(st)))
+    careless.cells[-1].source = answer.source
+    assert any("written answer" in p for p in release.leaks(nb, careless))
+
+
+def test_every_written_answer_of_the_course_is_tagged():
+    """Each <details> answer block of the instructor notebooks carries the tag, so that no
+    ungraded exercise's answer reaches the student version."""
+    untagged = [(p.name, i) for p in COURSE for i, c in enumerate(nbformat.read(p, 4).cells)
+                if c.cell_type == "markdown" and "<details>" in c.source
+                and release.ANSWER_TAG not in c.metadata.get("tags", [])]
+    assert untagged == []
+    tagged = sum(release.ANSWER_TAG in c.metadata.get("tags", [])
+                 for p in COURSE for c in nbformat.read(p, 4).cells)
+    assert tagged >= 9

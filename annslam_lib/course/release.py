@@ -24,10 +24,16 @@ import nbformat
 
 __all__ = ["ReleaseError", "Exercise", "exercises", "validate", "student_version", "release",
            "leaks", "read_notebook", "exercise_table", "solution_lines", "hidden_test_lines",
-           "CODE_STUB", "TEXT_STUB", "CELL_METADATA", "NOTEBOOK_METADATA"]
+           "CODE_STUB", "TEXT_STUB", "ANSWER_TAG", "ANSWER_STUB", "CELL_METADATA",
+           "NOTEBOOK_METADATA"]
 
 CODE_STUB = "# YOUR CODE HERE\nraise NotImplementedError()"  # nbgrader's Python stub
 TEXT_STUB = "YOUR ANSWER HERE"
+#: The tag of an ungraded exercise's written answer (an ordinary markdown cell: nbgrader
+#: takes a markdown solution cell only as a manually graded one). The student version
+#: replaces the cell by ANSWER_STUB; nbgrader's generate_assignment leaves such a cell as it is.
+ANSWER_TAG = "answer"
+ANSWER_STUB = "**Your answer.** " + TEXT_STUB
 BEGIN_SOLUTION, END_SOLUTION = "BEGIN SOLUTION", "END SOLUTION"
 BEGIN_HIDDEN, END_HIDDEN = "BEGIN HIDDEN TESTS", "END HIDDEN TESTS"
 _GRADE_ID = re.compile(r"^[a-zA-Z0-9_\-]+$")  # what nbgrader accepts
@@ -173,8 +179,9 @@ def student_version(nb, name: str = "notebook"):
     """A copy of instructor notebook ``nb`` for students: every solution region replaced by
     nbgrader's stub (code: ``# YOUR CODE HERE`` / ``raise NotImplementedError()``, indented
     like the marker; text: ``YOUR ANSWER HERE``), hidden tests removed, outputs and
-    execution counts cleared, nbgrader metadata kept. A solution cell without a region (an
-    ungraded exercise's written answer) becomes the stub as a whole, as in nbgrader; a code
+    execution counts cleared, nbgrader metadata kept. A markdown cell tagged
+    :data:`ANSWER_TAG` (an ungraded exercise's written answer) becomes :data:`ANSWER_STUB`; a
+    solution cell without a region becomes the stub as a whole, as in nbgrader; a code
     cell whose stub stands at the top level is tagged ``raises-exception`` like the test
     cells, so Run All goes on past an exercise not done yet."""
     validate(nb, name)
@@ -183,7 +190,10 @@ def student_version(nb, name: str = "notebook"):
         where = f"{name}, cell {i}"
         stub = CODE_STUB if cell.cell_type == "code" else TEXT_STUB
         regions = _regions(cell.source, BEGIN_SOLUTION, END_SOLUTION, where)
-        if _is_solution(cell) and not regions:
+        if cell.cell_type == "markdown" and ANSWER_TAG in cell.metadata.get("tags", []):
+            cell.source = ANSWER_STUB          # an ungraded exercise's written answer
+            cell.pop("attachments", None)
+        elif _is_solution(cell) and not regions:
             cell.source = stub                 # nbgrader: a solution cell without a region
         else:
             cell.source = _replace(cell.source, regions, stub)
@@ -216,6 +226,10 @@ def leaks(instructor, student) -> list[str]:
     code = (solution_lines(instructor) | hidden_test_lines(instructor)) & lines
     found += [f"solution or hidden-test line {s!r}" for s in sorted(code)]
     found += [f"marker {m.group(0)!r}" for m in _ANY_CASE_MARKER.finditer(text)]
+    for i, c in enumerate(instructor.cells):
+        if ANSWER_TAG in c.metadata.get("tags", []) and c.source.strip() and \
+                i < len(student.cells) and student.cells[i].source != ANSWER_STUB:
+            found.append(f"cell {i}: the written answer (tagged {ANSWER_TAG!r})")
     for i, c in enumerate(student.cells):
         if c.get("attachments") and (_is_solution(c) or _is_grade(c)):
             found.append(f"cell {i}: attachments {sorted(c['attachments'])}")
