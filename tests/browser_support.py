@@ -161,3 +161,16 @@ def start_lab(root_dir: Path, work: Path, *, timeout: float = 60.0) -> LabServer
             raise RuntimeError(f"JupyterLab did not answer /api/status within {timeout:.0f} s; "
                                f"its log:\n{server.log_tail()}")
         time.sleep(0.2)
+
+
+# Code-cell prompts: "[ ]:" never run, "[*]:" queued or running, "[12]:" done.
+# Resolves to "done" when every cell ran, "stopped" when execution ended with cells left over
+# (an error aborts the queue), so a broken notebook fails at once instead of at the time limit.
+RUN_STATE_JS = """() => {
+  const p = [...document.querySelectorAll('.jp-Notebook .jp-CodeCell .jp-InputPrompt')]
+    .map(e => e.textContent.trim());
+  const done = p.filter(t => /^\\[\\d+\\]:$/.test(t)).length;
+  if (p.length > 0 && done === p.length) return 'done';
+  if (done > 0 && !p.some(t => t === '[*]:')) return 'stopped';
+  return false;
+}"""

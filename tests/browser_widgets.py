@@ -26,8 +26,8 @@ import time
 
 import matplotlib
 import pytest
-from browser_support import (ARTIFACTS, CHROMIUM_ARGS, REPO, chromium_path, serve_copy,
-                             start_lab, why_no_browser)
+from browser_support import (ARTIFACTS, CHROMIUM_ARGS, REPO, RUN_STATE_JS, chromium_path,
+                             serve_copy, start_lab, why_no_browser)
 
 from annslam_lib.models.vehicle import ACFR_UTE
 
@@ -61,15 +61,6 @@ WIDGETS = [
     ("08_ann_slam_verdict", "chapter.r_scale_explorer(sweep=sweep, reference=ref, scale=1.0)",
      None),
 ]
-
-RUN_STATE_JS = """() => {
-  const p = [...document.querySelectorAll('.jp-Notebook .jp-CodeCell .jp-InputPrompt')]
-    .map(e => e.textContent.trim());
-  const done = p.filter(t => /^\\[\\d+\\]:$/.test(t)).length;
-  if (p.length > 0 && done === p.length) return 'done';
-  if (done > 0 && !p.some(t => t === '[*]:')) return 'stopped';
-  return false;
-}"""
 
 # The widget's state in cell `i`: slider readouts, its text (printed lines or the HTML
 # widget's <pre>), its image. Resolves once text and a loaded image are there and, with

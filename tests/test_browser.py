@@ -16,8 +16,8 @@ import time
 import matplotlib.image
 import numpy as np
 import pytest
-from browser_support import (ARTIFACTS, CHROMIUM_ARGS, REPO, chromium_path, serve_copy,
-                             start_lab, why_no_browser)
+from browser_support import (ARTIFACTS, CHROMIUM_ARGS, REPO, RUN_STATE_JS, chromium_path,
+                             serve_copy, start_lab, why_no_browser)
 
 from annslam_lib.chapters.ch00_course_map import scan_readout, scan_scrubber, scan_summary
 
@@ -25,18 +25,6 @@ NOTEBOOK = REPO / "notebooks" / "00_course_map.ipynb"
 SCREENSHOT = ARTIFACTS / "scan_scrubber.png"
 # Time limits (s). Measured here: page ready ~5 s, Run All ~6 s, a slider step < 1 s.
 PAGE_TIMEOUT, RUN_ALL_TIMEOUT, STEP_TIMEOUT = 60, 120, 30
-
-# Code-cell prompts: "[ ]:" never run, "[*]:" queued or running, "[12]:" done.
-# Resolves to "done" when every cell ran, "stopped" when execution ended with cells left over
-# (an error aborts the queue), so a broken notebook fails at once instead of at the time limit.
-RUN_STATE_JS = """() => {
-  const p = [...document.querySelectorAll('.jp-Notebook .jp-CodeCell .jp-InputPrompt')]
-    .map(e => e.textContent.trim());
-  const done = p.filter(t => /^\\[\\d+\\]:$/.test(t)).length;
-  if (p.length > 0 && done === p.length) return 'done';
-  if (done > 0 && !p.some(t => t === '[*]:')) return 'stopped';
-  return false;
-}"""
 
 # What the scrubber shows: the slider's own readout label, the printed line, the plot. Resolves
 # (to that state) only once the line and a fully loaded image are there and differ from `old`.
