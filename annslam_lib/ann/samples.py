@@ -100,7 +100,7 @@ def encode(pose, z, intensity=None, width=None) -> tuple[np.ndarray, np.ndarray]
         else np.asarray(pose, dtype=float)
     if pose.shape != (n, 3):
         raise ValueError(f"pose must be (3,) or ({n}, 3), got {pose.shape}")
-    if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(z))):
+    if not np.all(np.isfinite(z)):                 # the pose was checked above
         raise ValueError("pose and z must be finite")
     level = np.zeros(n) if intensity is None else np.asarray(intensity, dtype=float).reshape(-1)
     w = np.zeros(n) if width is None else np.asarray(width, dtype=float).reshape(-1)

@@ -259,20 +259,28 @@ class Transfer:
 
 
 
+def _sim(error: tuple, route: str, seed: int):
+    """Simulated run ``seed`` on ``route`` (beacon layout ``seed``) with the sorted
+    ``error`` items, and its beacons-only filter run."""
+    ds = simulate(seed=seed, route=route, beacon_seed=seed, raw_laser=False, **dict(error))
+    return ds, run(ds, SlamConfig.for_dataset("simulated"))
+
+
+# Cached: :func:`transfer` asks for the same training set and plain runs again for every
+# network it compares (notebook 08's exercise retrains on the same data); they are
+# deterministic, and only small results are kept (no raw laser, no filter history).
+@functools.lru_cache(maxsize=8)
+def _sim_training_set(error: tuple, route: str):
+    """The training set of the training run: ``route``, seed and beacon layout 0."""
+    ds, res = _sim(error, route, 0)
+    return ann.training_set(res, ds)
+
+
 @functools.lru_cache(maxsize=32)
 def _plain_sim_run(error: tuple, route: str, seed: int):
-    """Simulated run ``seed`` on ``route`` (beacon layout ``seed``) with the sorted
-    ``error`` items, its beacons-only filter's training set (None without samples) and map
-    errors. Cached: :func:`transfer` asks for the same plain runs again for every network
-    it compares (notebook 08's exercise retrains on the same data), and they are
-    deterministic; the cache holds the small no-raw-laser datasets only."""
-    ds = simulate(seed=seed, route=route, beacon_seed=seed, raw_laser=False, **dict(error))
-    res = run(ds, SlamConfig.for_dataset("simulated"))
-    try:
-        ts = ann.training_set(res, ds)
-    except ValueError:
-        ts = None
-    return ds, ts, map_errors(res.landmarks, ds.beacons)
+    """The test run ``seed`` on ``route`` and the map errors of its plain filter."""
+    ds, res = _sim(error, route, seed)
+    return ds, map_errors(res.landmarks, ds.beacons)
 
 
 
@@ -294,15 +302,13 @@ def transfer(error: dict | None = None, *, train_route: str = "loop", test_route
         raise ValueError("transfer needs at least one test seed")
     cfg = SlamConfig.for_dataset("simulated")
     key = tuple(sorted(err.items()))
-    _, ts, _ = _plain_sim_run(key, train_route, 0)
-    if ts is None:
-        raise ValueError(f"the training run on {train_route!r} gave no training samples")
+    ts = _sim_training_set(key, train_route)
     split = ann.chronological_split(ts)
     base_tc = ann.TrainConfig() if train_config is None else train_config
     rows = []
     for k in seeds:
         model = ann.train(ts, split, dataclasses.replace(base_tc, seed=k))
-        ds, _, p = _plain_sim_run(key, test_route, k)
+        ds, p = _plain_sim_run(key, test_route, k)
         a = map_errors(run(ds, cfg.replace(landmark_model="ann"),
                                                 landmark_model=model).landmarks, ds.beacons)
         rows.append((p.rmse, a.rmse, p.missed, a.missed, p.spurious, a.spurious))

@@ -176,7 +176,7 @@ class DenseEkfSlam:
             raise ValueError(f"gps_update: xy must be a finite (2,) position, got {xy!r}")
         H = np.zeros((2, self.x.size))
         H[0, 0] = H[1, 1] = 1.0
-        nis = self._kalman(H, np.asarray(xy, dtype=float) - self.x[:2], sigma_gps**2 * np.eye(2), gate)
+        nis = self._kalman(H, xy - self.x[:2], sigma_gps**2 * np.eye(2), gate)
         return nis, nis <= gate
 
     def augment(self, z, sigma_range: float, sigma_bearing: float) -> np.ndarray:
