@@ -79,3 +79,53 @@ def test_point_rmse_against_an_independent_sum():
             map_eval.point_rmse(bad)
     with pytest.raises(ValueError, match="NaN"):
         map_eval.point_rmse([[np.nan, 0.0]])
+
+
+def _by_hand(mapped, true):
+    """Independent reference for a known correspondence: Procrustes (scipy) and its RMSE."""
+    from scipy.linalg import orthogonal_procrustes
+    a, b = mapped - mapped.mean(0), true - true.mean(0)
+    Rp, _ = orthogonal_procrustes(a, b)
+    if np.linalg.det(Rp) < 0:
+        raise AssertionError("reference would reflect")
+    return float(np.sqrt(np.mean(np.sum((a @ Rp - b) ** 2, axis=1))))
+
+
+@pytest.mark.parametrize("angle_deg, shift", [(15.0, (0.0, 0.0)), (15.0, (6.0, -3.0)),
+                                              (-40.0, (25.0, 10.0)), (127.0, (-20.0, 5.0))])
+def test_map_errors_align_first_does_not_depend_on_the_frame(beacons, angle_deg, shift):
+    """Issue 13 finding 6: a map whose frame is rotated (15 deg is 5 m at 20 m) gives the
+    same matches and the same aligned RMSE as the same map in the right frame, plus a
+    spurious landmark and a missed beacon; the absolute error shows the frame."""
+    rng = np.random.default_rng(5)
+    good = beacons[:14] + rng.normal(0, 0.05, (14, 2))
+    good = np.vstack([good, [[60.0, -60.0]]])                  # a spurious landmark
+    ref = map_eval.map_errors(good, beacons)
+    moved = good @ rot(math.radians(angle_deg)).T + shift
+    e = map_eval.map_errors(moved, beacons)
+    np.testing.assert_array_equal(e.i_mapped, ref.i_mapped)
+    np.testing.assert_array_equal(e.j_true, ref.j_true)
+    assert e.i_mapped.size == 14 and e.missed == 1 and e.spurious == 1 and e.duplicates == 0
+    assert e.rmse_aligned == pytest.approx(ref.rmse_aligned, rel=1e-9)
+    assert e.rmse_aligned == pytest.approx(_by_hand(good[:14], beacons[:14]), rel=1e-9)
+    assert e.rmse > 1.0 > 0.1 > e.rmse_aligned
+    assert math.degrees(e.rotation) == pytest.approx(-angle_deg, abs=0.5)
+
+
+def test_map_errors_align_first_covers_landmarks_far_as_mapped(beacons):
+    """Rotated 1.5 degrees about one corner: the far landmarks are more than 1 m off as
+    mapped (matching before aligning would leave them out), all 15 after the loop."""
+    corner = beacons[np.argmin(beacons[:, 0] + beacons[:, 1])]
+    mapped = (beacons - corner) @ rot(math.radians(1.5)).T + corner
+    far = np.hypot(*(mapped - beacons).T) > 1.0
+    assert 3 <= far.sum() <= 12
+    i, _ = map_eval.match_landmarks(mapped, beacons, 1.0)
+    assert i.size == 15 - far.sum()                            # the old, frame-bound count
+    e = map_eval.map_errors(mapped, beacons)
+    assert e.i_mapped.size == 15 and e.rmse_aligned < 1e-9
+
+
+def test_map_errors_refuses_when_nothing_fits(beacons):
+    # two landmarks 0.5 m apart, far from everything: no pair of beacons is that close
+    with pytest.raises(ValueError, match="any rigid frame"):
+        map_eval.map_errors(np.array([[300.0, 300.0], [300.5, 300.0]]), beacons)

@@ -5,7 +5,8 @@ e^T P^-1 e (3 dof) against the simulator's truth, and the innovation NIS nu^T S^
 per observation) on any run. A statistic is compared with the band of ITS OWN distribution:
 the average of N independent runs at one scan with the band of an average of N chi-square
 values (:func:`chi2_band`), scan by scan; a time average over hundreds of correlated scans
-cannot be compared with a per-scan band.
+cannot be compared with a per-scan band. The map is judged as a whole: the NEES of all
+landmarks together with their joint covariance (2 N dof per run), summed over runs.
 """
 from __future__ import annotations
 
@@ -19,7 +20,8 @@ from ..models.geometry import wrap_angle
 from ..models.uncertainty import chi2_quantile
 
 __all__ = ["chi2_quantile", "chi2_band", "Consistency", "nees_consistency", "scan_nis",
-           "nis_consistency", "pose_nees", "correlation_matrix"]
+           "nis_consistency", "pose_nees", "map_nees", "MapConsistency", "map_consistency",
+           "correlation_matrix"]
 
 
 def chi2_band(dof, n=1, prob: float = 0.95) -> tuple[np.ndarray | float, np.ndarray | float]:
@@ -179,3 +181,65 @@ def pose_nees(result, dataset: Dataset) -> np.ndarray:
     e = result.trajectory[:, 1:4] - truth
     e[:, 2] = wrap_angle(e[:, 2])
     return np.einsum("ki,ki->k", e, np.linalg.solve(result.pose_cov, e[..., None])[..., 0])
+
+
+def map_nees(result, dataset: Dataset) -> tuple[float, int]:
+    """NEES of the whole final map of a simulated run and its dof: e^T P_mm^-1 e with
+    e the stacked landmark errors (estimate - the true beacon each landmark was made
+    from, ``result.landmark_true_id``) and P_mm the landmarks' JOINT covariance (their
+    block of ``result.covariance``, cross terms included); dof = 2 N. A consistent
+    filter's map NEES is chi2(2 N). Raises ValueError without truth, or when a
+    landmark has no true beacon (a spurious landmark has no error to normalise).
+    Notebook 05."""
+    beacons = getattr(dataset, "beacons", None)
+    if dataset.truth is None or beacons is None:
+        raise ValueError("map_nees needs a simulated dataset (with its true beacons)")
+    ids = np.asarray(result.landmark_true_id)
+    if ids.size == 0:
+        raise ValueError("the run mapped no landmark")
+    if np.any(ids < 0):
+        raise ValueError(f"{int(np.sum(ids < 0))} landmark(s) match no true beacon: "
+                         "the map NEES is defined for a map without spurious landmarks")
+    e = (np.asarray(result.landmarks) - np.asarray(beacons)[ids]).ravel()
+    P = np.asarray(result.covariance)[3:, 3:]
+    if P.shape != (e.size, e.size):
+        raise ValueError(f"covariance block {P.shape} does not match {ids.size} landmarks")
+    L = np.linalg.cholesky(0.5 * (P + P.T))
+    w = np.linalg.solve(L, e)
+    return float(w @ w), int(e.size)
+
+
+@dataclass(frozen=True)
+class MapConsistency:
+    """Map NEES of N runs (notebook 05): per_dof = total NEES / total dof, its ``prob``
+    band (``chi2_band(1, dof)``), inside (per_dof within it), and each run's NEES / dof."""
+
+    per_dof: float
+    lo: float
+    hi: float
+    dof: int
+    inside: bool
+    runs: np.ndarray
+    prob: float
+
+    def summary(self) -> str:
+        return (f"map NEES / dof: {self.per_dof:.3f} over {self.runs.size} runs ({self.dof} dof), "
+                f"{100 * self.prob:.0f} % band [{self.lo:.3f}, {self.hi:.3f}]: "
+                f"{'inside' if self.inside else 'OUTSIDE'}")
+
+
+def map_consistency(values, dofs, *, prob: float = 0.95) -> MapConsistency:
+    """The map NEES of independent runs together (``values``, ``dofs``: one
+    :func:`map_nees` pair per run): their sum is chi2(sum of dof) for a consistent filter,
+    so the total per dof is judged against ``chi2_band(1, total dof)``."""
+    v, d = np.asarray(values, dtype=float).ravel(), np.asarray(dofs, dtype=float).ravel()
+    if v.size == 0 or v.shape != d.shape:
+        raise ValueError(f"values and dofs must be non-empty and of one length, got {v.size} "
+                         f"and {d.size}")
+    if not (np.all(np.isfinite(v)) and np.all(v >= 0) and np.all(d > 0)):
+        raise ValueError("map NEES values must be finite and >= 0, dofs positive")
+    total = float(d.sum())
+    lo, hi = chi2_band(1, total, prob)
+    per = float(v.sum() / total)
+    return MapConsistency(per_dof=per, lo=lo, hi=hi, dof=int(total), inside=bool(lo <= per <= hi),
+                          runs=v / d, prob=_checks.probability("prob", prob))

@@ -2,7 +2,14 @@
 
 Mapped landmarks are matched one-to-one to the true ones by the assignment that
 minimises the total distance (Hungarian algorithm, ``scipy.optimize.linear_sum_assignment``);
-a pair farther apart than ``max_distance`` is not a match. Two errors are reported:
+a pair farther apart than ``max_distance`` is not a match. :func:`map_errors` matches INSIDE
+an alignment loop (align first): a map whose frame is off (rotated, shifted: SLAM cannot
+observe its frame) is matched in the frame that fits it best, so its aligned error covers
+every landmark and does not depend on the frame. The loop starts from the map as it is
+and, when that matches too few landmarks, from the best of the rigid motions that carry a
+pair of mapped landmarks onto a pair of true ones with the same separation (a RANSAC-like
+search over pairs); then it alternates matching and :func:`rigid_align` until the matches
+stop changing. Two errors are reported for the final pairs:
 
 - absolute: the distances of the matched pairs as they are (the map in the GPS frame);
 - aligned: after the best rigid 2-D motion (rotation + translation, no scale) applied to
@@ -93,23 +100,112 @@ class MapErrors:
                 f"({math.degrees(self.rotation):.2f} deg, {np.hypot(*self.translation):.3f} m)")
 
 
+def _pair_hypotheses(mapped, true, max_distance: float, max_pairs: int = 3000,
+                     max_hypotheses: int = 20000) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Rigid motions carrying a pair of mapped landmarks onto a pair of true ones whose
+    separation agrees within 2 max_distance (and exceeds it, for a well-defined rotation),
+    the best first by the number of mapped landmarks they bring within max_distance of a
+    true one (ties: the smaller sum of squared, capped distances). Seeded subsampling keeps
+    large maps cheap; the result is deterministic."""
+    M, T = mapped.shape[0], true.shape[0]
+    if M < 2 or T < 2:
+        return []
+    rng = np.random.default_rng(0)
+    i1, i2 = np.triu_indices(M, 1)
+    if i1.size > max_pairs:
+        k = np.sort(rng.choice(i1.size, max_pairs, replace=False))
+        i1, i2 = i1[k], i2[k]
+    j1, j2 = np.nonzero(~np.eye(T, dtype=bool))         # ordered: both directions
+    vm, vt = mapped[i2] - mapped[i1], true[j2] - true[j1]
+    dm, dt = np.hypot(*vm.T), np.hypot(*vt.T)
+    a, b = np.nonzero((np.abs(dm[:, None] - dt[None, :]) <= 2.0 * max_distance)
+                      & (dm[:, None] > 2.0 * max_distance))
+    if a.size == 0:
+        return []
+    if a.size > max_hypotheses:
+        k = np.sort(rng.choice(a.size, max_hypotheses, replace=False))
+        a, b = a[k], b[k]
+    th = np.arctan2(vt[b, 1], vt[b, 0]) - np.arctan2(vm[a, 1], vm[a, 0])
+    c, s = np.cos(th), np.sin(th)
+    pm = 0.5 * (mapped[i1[a]] + mapped[i2[a]])
+    pt = 0.5 * (true[j1[b]] + true[j2[b]])
+    tx, ty = pt[:, 0] - (c * pm[:, 0] - s * pm[:, 1]), pt[:, 1] - (s * pm[:, 0] + c * pm[:, 1])
+    cap = max_distance ** 2
+    score, cost = np.empty(a.size), np.empty(a.size)
+    for lo in range(0, a.size, 1000):                   # chunks: (H, M, T) distances
+        h = slice(lo, lo + 1000)
+        x = c[h, None] * mapped[None, :, 0] - s[h, None] * mapped[None, :, 1] + tx[h, None]
+        y = s[h, None] * mapped[None, :, 0] + c[h, None] * mapped[None, :, 1] + ty[h, None]
+        d2 = ((x[..., None] - true[None, None, :, 0]) ** 2
+              + (y[..., None] - true[None, None, :, 1]) ** 2).min(axis=2)
+        score[h] = np.sum(d2 <= cap, axis=1)
+        cost[h] = np.sum(np.minimum(d2, cap), axis=1)
+    best = np.lexsort((cost, -score))[:5]
+    return [(np.array([[c[k], -s[k]], [s[k], c[k]]]), np.array([tx[k], ty[k]])) for k in best]
+
+
+def _refine(mapped, true, R, t, max_distance: float, max_iter: int = 30):
+    """Alternate matching (in the frame R, t) and rigid alignment until the matches repeat.
+    Returns (i, j, R, t) or None when fewer than 2 landmarks match."""
+    seen = None
+    for _ in range(max_iter):
+        i, j = match_landmarks(mapped @ R.T + t, true, max_distance)
+        if i.size < 2:
+            return None
+        key = (tuple(i.tolist()), tuple(j.tolist()))
+        if key == seen:
+            break
+        seen = key
+        R, t = rigid_align(mapped[i], true[j])
+    return i, j, R, t
+
+
+def _align_and_match(mapped, true, max_distance: float):
+    """The matches and rigid motion of :func:`map_errors` (module docstring), or None."""
+    eye = (np.eye(2), np.zeros(2))
+    out = _refine(mapped, true, *eye, max_distance)
+    enough = 0.8 * min(mapped.shape[0], true.shape[0])
+    if out is not None and out[0].size >= enough:
+        return out
+    best = out
+    for R, t in _pair_hypotheses(mapped, true, max_distance):
+        cand = _refine(mapped, true, R, t, max_distance)
+        if cand is None:
+            continue
+        if best is None or cand[0].size > best[0].size or (
+                cand[0].size == best[0].size
+                and _sse(mapped, true, *cand) < _sse(mapped, true, *best) - 1e-12):
+            best = cand
+    return best
+
+
+def _sse(mapped, true, i, j, R, t) -> float:
+    d = mapped[i] @ R.T + t - true[j]
+    return float(np.sum(d * d))
+
+
 def map_errors(mapped, true, *, max_distance: float = 1.0) -> MapErrors:
-    """Match ``mapped`` (M, 2) to ``true`` (T, 2) landmarks (:func:`match_landmarks`) and
-    measure the errors absolute and after the best rigid alignment of the matched pairs
-    (module docstring). Needs at least 2 matches."""
+    """Match ``mapped`` (M, 2) to ``true`` (T, 2) landmarks inside an alignment loop (module
+    docstring: align first, so the result does not depend on the map's frame) and measure
+    the errors of the matched pairs absolute and after the best rigid alignment. A pair is
+    a match when it lies within ``max_distance`` metres in the aligned frame. Raises
+    ValueError when fewer than 2 landmarks can be matched in any frame."""
     mapped, true = _checks.points("mapped", mapped), _checks.points("true", true)
-    i, j = match_landmarks(mapped, true, max_distance)
-    if i.size < 2:
-        raise ValueError(f"only {i.size} mapped landmark(s) lie within max_distance = "
-                         f"{max_distance} m of a true one: need 2 to align")
+    max_distance = _checks.real("max_distance", max_distance, lo=0.0, strict=True)
+    found = _align_and_match(mapped, true, max_distance)
+    if found is None:
+        raise ValueError(f"fewer than 2 of the {mapped.shape[0]} mapped landmarks can be matched "
+                         f"within max_distance = {max_distance} m to the {true.shape[0]} true "
+                         "ones in any rigid frame: need 2 to align")
+    i, j, R, t = found
     a, b = mapped[i], true[j]
     err = np.hypot(*(a - b).T)
-    R, t = rigid_align(a, b)
     err_al = np.hypot(*(a @ R.T + t - b).T)
     rest = np.setdiff1d(np.arange(mapped.shape[0]), i)
     near = 0
     if rest.size:
-        d = np.hypot(mapped[rest, None, 0] - true[None, :, 0], mapped[rest, None, 1] - true[None, :, 1])
+        moved = mapped[rest] @ R.T + t
+        d = np.hypot(moved[:, None, 0] - true[None, :, 0], moved[:, None, 1] - true[None, :, 1])
         near = int(np.sum(d.min(axis=1) <= max_distance))
     return MapErrors(i_mapped=i, j_true=j, error=err, error_aligned=err_al,
                      rmse=float(np.sqrt(np.mean(err**2))),

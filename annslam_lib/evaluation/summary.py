@@ -6,13 +6,15 @@ SLAM explorer's readout, the verdict's configurations, the R-scale sweep) takes 
 from here, so one definition of each number exists:
 
 - trajectory: RMSE of the filtered path at the odometry rate against the GPS fixes inside
-  its span (``evaluation.trajectory``), over the whole run and after ``t_heldout``;
+  its span (``evaluation.trajectory``), over the whole run and after ``t_heldout``, and
+  over the whole run after the best SE(2) alignment (the frame error removed);
 - pose uncertainty: the mean trace of the laser POSITION covariance, P_xx + P_yy (m^2),
   after each scan's update (a trace over x, y and phi would add m^2 to rad^2);
 - consistency: total laser NIS over its degrees of freedom (1 for a consistent filter);
-- map (where a surveyed map exists): matched, missed, spurious and duplicate landmarks
-  within ``max_distance`` and the RMSE absolute and after the best rigid alignment
-  (``evaluation.map``), and over a set of held-out beacons.
+- map (where a surveyed map exists): matched, missed and spurious landmarks within
+  ``max_distance`` AS MAPPED (a count that depends on the map's frame), and the RMSE
+  absolute and after the best rigid alignment with duplicates, matched in the best frame
+  (``evaluation.map.map_errors``, align first), and over a set of held-out beacons.
 """
 from __future__ import annotations
 
@@ -23,7 +25,7 @@ import numpy as np
 
 from .. import _checks
 from ..data.records import Dataset
-from .map import MapErrors, map_errors, match_landmarks, point_rmse
+from .map import MapErrors, map_errors, match_landmarks, point_rmse, rigid_align
 from .trajectory import trajectory_errors
 
 __all__ = ["METRICS", "RunMetrics", "run_metrics", "pose_trace", "nis_per_dof",
@@ -34,7 +36,9 @@ METRICS = {
     "map_rmse": "map RMSE vs surveyed beacons, absolute (m)",
     "map_rmse_aligned": "map RMSE after the best rigid alignment (m)",
     "map_rmse_heldout": "map RMSE over the held-out beacons (m)",
+    "map_rmse_heldout_aligned": "map RMSE over the held-out beacons, whole map aligned (m)",
     "traj_rmse": "trajectory RMSE vs GPS, whole run (m)",
+    "traj_rmse_aligned": "trajectory RMSE vs GPS after the best SE(2) alignment, whole run (m)",
     "traj_rmse_heldout": "trajectory RMSE vs GPS, held-out time (m)",
     "pose_trace": "mean pose covariance trace P_xx + P_yy, whole run (m^2)",
     "pose_trace_heldout": "mean pose covariance trace, held-out time (m^2)",
@@ -54,12 +58,14 @@ class RunMetrics:
     rejected: int
     traj_rmse: float
     traj_rmse_heldout: float
+    traj_rmse_aligned: float
     pose_trace: float
     pose_trace_heldout: float
     nis_per_dof: float
     map_rmse: float = math.nan
     map_rmse_aligned: float = math.nan
     map_rmse_heldout: float = math.nan
+    map_rmse_heldout_aligned: float = math.nan
     matched: int = -1
     missed: int = -1
     spurious: int = -1
@@ -102,21 +108,34 @@ def nis_per_dof(result) -> float:
     return float(np.sum(result.nis["nis"][k]) / dof) if dof > 0 else math.nan
 
 
-def heldout_map_rmse(result, beacons, held_out, max_distance: float = 1.0) -> float:
-    """Map RMSE (m, absolute) over the surveyed beacons ``held_out`` (indices into
-    ``beacons``) that the map matches (``evaluation.map.match_landmarks``); NaN if none is."""
+def heldout_map_rmse(result, beacons, held_out, max_distance: float = 1.0, *,
+                     aligned: bool = False) -> float:
+    """Map RMSE (m) over the surveyed beacons ``held_out`` (indices into ``beacons``) that
+    the map matches (``evaluation.map.match_landmarks``); NaN if none is. ``aligned``: after
+    the best rigid alignment of the WHOLE matched map onto the survey (its frame removed,
+    ``evaluation.map.rigid_align``; NaN with fewer than 2 matches), else absolute."""
     i, j = match_landmarks(result.landmarks, beacons, max_distance)
     sel = np.isin(j, np.asarray(held_out))
     if not sel.any():
         return math.nan
-    return point_rmse(result.landmarks[i[sel]], beacons[j[sel]])
+    pts = np.asarray(result.landmarks, dtype=float)[i]
+    if aligned:
+        if i.size < 2:
+            return math.nan
+        R, t = rigid_align(pts, beacons[j])
+        pts = pts @ R.T + t
+    return point_rmse(pts[sel], beacons[j[sel]])
 
 
-def _traj_rmse(traj, gps) -> float:
+def _traj_rmse(traj, gps) -> tuple[float, float]:
+    """(absolute, SE(2)-aligned) RMSE against the fixes in the span; NaN without any."""
     if traj.shape[0] == 0:
-        return math.nan
+        return math.nan, math.nan
     inside = (gps.t >= traj[0, 0]) & (gps.t <= traj[-1, 0])
-    return trajectory_errors(traj, gps).rmse if np.any(inside) else math.nan
+    if not np.any(inside):
+        return math.nan, math.nan
+    e = trajectory_errors(traj, gps)
+    return e.rmse, e.rmse_aligned
 
 
 def run_metrics(result, dataset: Dataset, *, t_heldout: float | None = None,
@@ -129,10 +148,11 @@ def run_metrics(result, dataset: Dataset, *, t_heldout: float | None = None,
     if t_heldout is not None:
         late = t >= t_heldout
         held = dict(pose_trace_heldout=float(tr[late].mean()) if late.any() else math.nan,
-                    traj_rmse_heldout=_traj_rmse(odo[odo[:, 0] >= t_heldout], dataset.gps))
+                    traj_rmse_heldout=_traj_rmse(odo[odo[:, 0] >= t_heldout], dataset.gps)[0])
     c = result.counts
+    whole = _traj_rmse(odo, dataset.gps)
     out = dict(scans=int(c["scans"]), landmarks=int(result.landmarks.shape[0]),
-               rejected=int(c["rejected"]), traj_rmse=_traj_rmse(odo, dataset.gps),
+               rejected=int(c["rejected"]), traj_rmse=whole[0], traj_rmse_aligned=whole[1],
                traj_rmse_heldout=held.get("traj_rmse_heldout", math.nan),
                pose_trace=float(tr.mean()) if tr.size else math.nan,
                pose_trace_heldout=held.get("pose_trace_heldout", math.nan),
@@ -142,11 +162,16 @@ def run_metrics(result, dataset: Dataset, *, t_heldout: float | None = None,
         n_map, n_true = int(result.landmarks.shape[0]), len(dataset.beacons)
         out.update(matched=int(i.size), missed=n_true - int(i.size), spurious=n_map - int(i.size),
                    duplicates=0)
-        if i.size >= 2:
-            m = map_errors(result.landmarks, dataset.beacons, max_distance=max_distance)
-            out.update(map_errors=m, duplicates=m.duplicates, map_rmse=m.rmse,
-                       map_rmse_aligned=m.rmse_aligned)
+        if n_map >= 2:
+            try:                           # aligned first: a map in a wrong frame is scored too
+                m = map_errors(result.landmarks, dataset.beacons, max_distance=max_distance)
+            except ValueError:             # nothing matches in any frame: the map RMSE stays NaN
+                m = None
+            if m is not None:
+                out.update(map_errors=m, duplicates=m.duplicates, map_rmse=m.rmse,
+                           map_rmse_aligned=m.rmse_aligned)
         if held_out_beacons is not None:
-            out["map_rmse_heldout"] = heldout_map_rmse(result, dataset.beacons,
-                                                       held_out_beacons, max_distance)
+            for key, al in (("map_rmse_heldout", False), ("map_rmse_heldout_aligned", True)):
+                out[key] = heldout_map_rmse(result, dataset.beacons, held_out_beacons,
+                                            max_distance, aligned=al)
     return RunMetrics(**out)

@@ -5,16 +5,25 @@ A trajectory is a (K, 4) array of rows (t, x, y, phi): time in seconds on the ru
 clock, the LASER position in the world frame and the heading. The ACFR GPS antenna
 sits with the laser, so a GPS fix is compared with the trajectory's (x, y) at the
 fix's time, found by :func:`interpolate_poses`.
+
+Two errors are reported: absolute (the trajectory as estimated, in the GPS frame) and
+SE(2)-aligned, after the best rigid motion (rotation and translation, no scale) of the
+estimated positions onto the fixes (``evaluation.map.rigid_align``, Kabsch): the frame
+error that a SLAM run cannot observe (chapter 06) is removed, the shape error is left.
+This is evo's ``evo_ape --align`` on the translation part (``tests/test_trajectory_evo.py``
+checks the two agree).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from .. import _checks
 from ..data.records import Gps
 from ..models.geometry import interpolate_poses
+from .map import rigid_align
 
 __all__ = ["TrajectoryErrors", "trajectory_errors", "gps_outliers"]
 
@@ -26,7 +35,10 @@ class TrajectoryErrors:
     t (N,): times of the fixes used; offset (N, 2): trajectory minus GPS (East,
     North), metres; error (N,): its length; rmse, mean, max, final: sqrt(mean
     error^2), mean, largest and last error (m); t_max: time of the largest error;
-    n_outside: fixes left out because they lie outside the trajectory's span.
+    n_outside: fixes left out because they lie outside the trajectory's span;
+    rmse_aligned: the RMSE after the best SE(2) alignment onto the fixes (module docstring;
+    NaN with fewer than 2 fixes or a trajectory that does not move), rotation (rad) and
+    translation (2,) of that alignment (estimate -> GPS).
     """
 
     t: np.ndarray
@@ -38,11 +50,15 @@ class TrajectoryErrors:
     final: float
     t_max: float
     n_outside: int
+    rmse_aligned: float = math.nan
+    rotation: float = math.nan
+    translation: np.ndarray = field(default_factory=lambda: np.full(2, math.nan))
 
     def summary(self) -> str:
         """One line: RMSE, max (with its time) and final error, rounded to cm."""
-        return (f"RMSE {self.rmse:.2f} m, max {self.max:.2f} m (t = {self.t_max:.1f} s), "
-                f"final {self.final:.2f} m over {self.t.size} fixes")
+        return (f"RMSE {self.rmse:.2f} m ({self.rmse_aligned:.2f} m aligned), max "
+                f"{self.max:.2f} m (t = {self.t_max:.1f} s), final {self.final:.2f} m over "
+                f"{self.t.size} fixes")
 
 
 def trajectory_errors(traj, gps: Gps) -> TrajectoryErrors:
@@ -68,10 +84,17 @@ def trajectory_errors(traj, gps: Gps) -> TrajectoryErrors:
     offset = interpolate_poses(traj, t)[:, :2] - gps.xy[inside]
     error = np.hypot(offset[:, 0], offset[:, 1])
     i = int(np.argmax(error))
+    est = offset + gps.xy[inside]
+    rmse_al, rot, shift = math.nan, math.nan, np.full(2, math.nan)
+    if t.size >= 2 and np.ptp(est, axis=0).max() > 0 and np.ptp(gps.xy[inside], axis=0).max() > 0:
+        R, shift = rigid_align(est, gps.xy[inside])
+        d = est @ R.T + shift - gps.xy[inside]
+        rmse_al, rot = float(np.sqrt(np.mean(np.sum(d * d, axis=1)))), math.atan2(R[1, 0], R[0, 0])
     return TrajectoryErrors(t=t, offset=offset, error=error,
                             rmse=float(np.sqrt(np.mean(error**2))), mean=float(error.mean()),
                             max=float(error[i]), final=float(error[-1]), t_max=float(t[i]),
-                            n_outside=int(np.count_nonzero(~inside)))
+                            n_outside=int(np.count_nonzero(~inside)), rmse_aligned=rmse_al,
+                            rotation=rot, translation=shift)
 
 
 def gps_outliers(gps: Gps, max_speed: float = 10.0, tolerance: float = 3.0) -> np.ndarray:
