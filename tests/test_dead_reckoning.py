@@ -1,6 +1,7 @@
 """Dead reckoning (annslam_lib.dead_reckoning) against chained kinematics.predict, the
 simulator's truth, and the real Car Park run."""
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -245,3 +246,38 @@ def test_bad_input():
         dead_reckoning.initial_pose_from_gps(odo, still, ACFR_UTE, window=-1.0)
     with pytest.raises(ValueError, match="min_speed"):
         dead_reckoning.gps_heading(still, odo, ACFR_UTE, min_speed=0.0)
+
+
+# --------------------------------------------------------------------------- robust start
+
+def _moved_first_fix(gps, dx):
+    east = gps.east.copy()
+    east[0] += dx
+    return type(gps)(t=gps.t.copy(), east=east, north=gps.north.copy())
+
+
+def test_robust_fit_leaves_out_a_wrong_first_fix(car_park):
+    """Issue 13 finding 4: a first fix 500 m off was trusted as the start. Now it is left
+    out (counted) and the start comes from the first fix kept: the clean fit's start to
+    within the car's motion between the two fixes."""
+    odo, gps, veh = car_park.odometry, car_park.gps, car_park.vehicle
+    clean = dead_reckoning.initial_pose_from_gps(odo, gps, veh, window=10.0)
+    assert clean.rejected == 0
+    first = np.flatnonzero(gps.t >= odo.t[0])[0]
+    assert first == 0
+    bad = dead_reckoning.initial_pose_from_gps(odo, _moved_first_fix(gps, 500.0), veh, window=10.0)
+    assert bad.rejected == 1 and bad.fixes == clean.fixes - 1
+    assert np.hypot(*(bad.pose[:2] - clean.pose[:2])) < 0.2
+    assert abs(math.degrees(bad.pose[2] - clean.pose[2])) < 0.5
+    assert bad.rms < 2 * clean.rms + 0.01
+
+
+def test_robust_fit_raises_when_the_start_cannot_match_gps(car_park):
+    odo, gps, veh = car_park.odometry, car_park.gps, car_park.vehicle
+    fast = type(odo)(t=odo.t.copy(), speed=odo.speed * 3.0, steering=odo.steering.copy())
+    with pytest.raises(ValueError, match="residual|fit one dead-reckoned path"):
+        dead_reckoning.initial_pose_from_gps(fast, gps, veh, window=10.0)
+    with pytest.raises(ValueError, match="max_rms"):
+        dead_reckoning.initial_pose_from_gps(odo, gps, veh, window=10.0, max_rms=0.01)
+    with pytest.raises(ValueError, match="outlier_floor"):
+        dead_reckoning.initial_pose_from_gps(odo, gps, veh, outlier_floor=0.0)

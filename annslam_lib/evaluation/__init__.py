@@ -5,6 +5,7 @@
 - ``consistency``: NEES, NIS and their chi-square bands
 - ``summary``: ``run_metrics``, the one summary of a run every table uses
 - ``timing``: per-step cost of the efficient and dense filters
+- ``calibration``: noise values read off the data (the GPS's own scatter)
 """
 
-__all__ = ["trajectory", "map", "consistency", "summary", "timing"]
+__all__ = ["trajectory", "map", "consistency", "summary", "timing", "calibration"]

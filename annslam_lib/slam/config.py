@@ -80,11 +80,13 @@ class SlamConfig:
         the run: anchors the map in the GPS frame) or 'all'.
         gps_init_seconds: s. sigma_gps: m, per axis (ACFR: 0.05).
         gps_gate_prob: a fix whose NIS exceeds chi2.ppf(gps_gate_prob, 2) is rejected
-        (GPS jumps); 1.0 accepts every fix.
+        and counted (``counts['gps_rejected']``; GPS jumps); default 0.9999 on every run,
+        1.0 accepts every fix.
     Initial pose (at the first odometry sample; the filter starts there)
         initial_pose: 'gps' (``slam.dead_reckoning.initial_pose_from_gps``: position = first
-        GPS fix, heading = least-squares fit of the dead-reckoned path of the first
-        ``initial_window`` seconds to the GPS track: no hand-tuned heading), 'truth'
+        GPS fix kept, heading = robust least-squares fit of the dead-reckoned path of the
+        first ``initial_window`` seconds to the GPS track: no hand-tuned heading; raises
+        when its residual is implausible), 'truth'
         (simulator), 'auto' ('truth' if the dataset has it, else 'gps'), or an explicit
         (x, y, phi).
         initial_window: s, the fit window of 'gps'.
@@ -112,7 +114,7 @@ class SlamConfig:
     gps_mode: str = "init"
     gps_init_seconds: float = 10.0
     sigma_gps: float = 0.05
-    gps_gate_prob: float = 1.0
+    gps_gate_prob: float = 0.9999
     initial_pose: object = "auto"
     initial_window: float = 10.0
     initial_sigma_xy: float = 0.1

@@ -123,7 +123,9 @@ class HeadingFit:
     pose (3,): laser pose at ``t``, the first odometry time; fixes: GPS fixes used;
     window (s): the fitted span after the first fix; travel (m): farthest fix from the
     first one; rms (m): RMS distance between the fitted dead-reckoned path and the
-    fixes, a measure of how well the model explains the start of the run.
+    fixes used, a measure of how well the model explains the start of the run;
+    rejected: fixes of the window left out as outliers (the robust fit, below); t_end:
+    time of the window's last fix (s): the fixes up to it went into the fit.
     """
 
     pose: np.ndarray
@@ -132,12 +134,26 @@ class HeadingFit:
     window: float
     travel: float
     rms: float
+    rejected: int = 0
+    t_end: float = math.nan
+
+
+def _rotation_fit(D, G, pivot_d, pivot_g):
+    """The one-angle Procrustes fit of paths D onto fixes G about the pivots: (R, start,
+    residuals (K, 2))."""
+    d, g = D - pivot_d, G - pivot_g
+    theta = math.atan2(float(np.sum(d[:, 0] * g[:, 1] - d[:, 1] * g[:, 0])),
+                       float(np.sum(d[:, 0] * g[:, 0] + d[:, 1] * g[:, 1])))
+    c, s = math.cos(theta), math.sin(theta)
+    R = np.array([[c, -s], [s, c]])
+    return theta, R, pivot_g - R @ pivot_d, d @ R.T - g
 
 
 def initial_pose_from_gps(odometry: Odometry, gps: Gps, vehicle: Vehicle, *,
                           window: float = 10.0, min_travel: float = 2.0,
                           fit_position: bool = False,
-                          encoder_correction: bool = True) -> HeadingFit:
+                          encoder_correction: bool = True,
+                          outlier_floor: float = 2.0, max_rms: float = 2.0) -> HeadingFit:
     """Initial laser pose estimated from the data (notebook 01, "Where does the car start?").
 
     Position: the first GPS fix at or after ``odometry.t[0]`` (the GPS antenna is the
@@ -152,6 +168,17 @@ def initial_pose_from_gps(odometry: Odometry, gps: Gps, vehicle: Vehicle, *,
     g_i = gps_i - gps_g relative to the first fix g, is the closed form
     theta = atan2(sum d_i x g_i, sum d_i . g_i) (a one-angle Procrustes problem).
     The pose at ``odometry.t[0]`` is then (gps_g - R(theta) D(t_g), theta).
+
+    Robust (issue 13): the fixes of the window are first fitted about their centroids
+    (position and heading free) and a fix whose residual exceeds 3 robust standard
+    deviations of the residuals (1.4826 MAD) and at least ``outlier_floor`` m (a gross error:
+    a receiver's ordinary scatter stays in), is left out;
+    the fit is repeated until no fix changes side. The pivot is then the first fix KEPT, so
+    a wrong first fix is not trusted as the start. With clean fixes nothing is left out and
+    the result is the plain fit above. Raises ValueError if the fit's RMS residual over the
+    fixes kept exceeds ``max_rms`` m (the dead-reckoned start does not match GPS: a wrong
+    vehicle model, a clock offset or a receiver that is off), or if fewer than half of the
+    window's fixes (or fewer than 3) are kept.
 
     Raises ValueError if no fix lies in the odometry's span, or if the fixes of the
     window never get ``min_travel`` m from the first one (a standing car shows no
@@ -174,21 +201,43 @@ def initial_pose_from_gps(odometry: Odometry, gps: Gps, vehicle: Vehicle, *,
         raise ValueError(f"the GPS fixes of the first {window} s stay within {travel:.3g} m of "
                          f"the first fix (< min_travel = {min_travel} m): the heading is not "
                          "observable; use a longer window")
+    for name, val in (("outlier_floor", outlier_floor), ("max_rms", max_rms)):
+        if not (isinstance(val, (int, float)) and math.isfinite(val) and val > 0):
+            raise ValueError(f"{name} must be a positive finite number, got {val!r}")
     path = dead_reckon(odometry, np.zeros(3), vehicle, encoder_correction=encoder_correction)
     D = interpolate_poses(path, gps.t[use])[:, :2]
     G = gps.xy[use]
-    # About the first fix (its position is trusted), or about the centroids.
+    keep = np.ones(use.size, dtype=bool)
+    for _ in range(10):                       # robust: centroid fit, outliers out, repeat
+        if keep.sum() < 2:
+            break
+        _, R_all, start_all, _ = _rotation_fit(D[keep], G[keep], D[keep].mean(axis=0),
+                                               G[keep].mean(axis=0))
+        r_all = np.hypot(*(D @ R_all.T + start_all - G).T)
+        mad = 1.4826 * float(np.median(np.abs(r_all[keep] - np.median(r_all[keep]))))
+        limit = max(float(np.median(r_all[keep])) + 3.0 * mad, outlier_floor)
+        new = r_all <= limit
+        if np.array_equal(new, keep):
+            break
+        keep = new
+    n_keep = int(keep.sum())
+    if n_keep < max(3, (use.size + 1) // 2):
+        raise ValueError(f"only {n_keep} of the {use.size} GPS fixes of the first {window} s fit "
+                         "one dead-reckoned path: the fixes or the odometry are not consistent "
+                         "enough to give a start")
+    D, G = D[keep], G[keep]
+    # About the first fix kept (its position is trusted), or about the centroids.
     cd, cg = (D.mean(axis=0), G.mean(axis=0)) if fit_position else (D[0], G[0])
-    d, g = D - cd, G - cg
-    theta = math.atan2(float(np.sum(d[:, 0] * g[:, 1] - d[:, 1] * g[:, 0])),
-                       float(np.sum(d[:, 0] * g[:, 0] + d[:, 1] * g[:, 1])))
-    c, s = math.cos(theta), math.sin(theta)
-    R = np.array([[c, -s], [s, c]])
-    resid = d @ R.T - g
-    start = cg - R @ cd
+    theta, R, start, resid = _rotation_fit(D, G, cd, cg)
+    rms = float(np.sqrt(np.mean(np.sum(resid**2, axis=1))))
+    if rms > max_rms:
+        raise ValueError(f"the initial-pose fit leaves an RMS residual of {rms:.3g} m over "
+                         f"{n_keep} GPS fixes (> max_rms = {max_rms} m): the dead-reckoned start "
+                         "does not match GPS (a wrong vehicle model, a clock offset or a "
+                         "receiver that is off); the start is not trusted")
     return HeadingFit(pose=np.array([start[0], start[1], theta]), t=float(odometry.t[0]),
-                      fixes=int(use.size), window=float(window), travel=travel,
-                      rms=float(np.sqrt(np.mean(np.sum(resid**2, axis=1)))))
+                      fixes=n_keep, window=float(window), travel=travel, rms=rms,
+                      rejected=int(use.size - n_keep), t_end=float(gps.t[use[-1]]))
 
 
 def gps_heading(gps: Gps, odometry: Odometry, vehicle: Vehicle, *, min_speed: float = 0.5,
