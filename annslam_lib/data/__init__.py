@@ -5,6 +5,7 @@
 - ``fetch``: the data folder, download and sha256 verification
 - ``loaders``: the real runs parsed into records (``load('car_park')``)
 - ``simulate``: a seeded simulator of the same car with ground truth
+- ``screening``: damaged sensor streams repaired by stated rules and counted (on entry to a run)
 
 Adding a dataset: its entry in ``registry`` and its parser in ``loaders``.
 """
@@ -13,7 +14,7 @@ from __future__ import annotations
 from .._lazy import attach
 
 __getattr__, __dir__, _names = attach(
-    __name__, ["records", "registry", "fetch", "loaders", "simulate"],
+    __name__, ["records", "registry", "fetch", "loaders", "simulate", "screening"],
     {"load": "loaders", "load_car_park": "loaders", "load_victoria_park": "loaders",
      "DataError": "fetch", "Dataset": "records"})
 __all__ = _names + ["filter_defaults", "filter_default_names"]

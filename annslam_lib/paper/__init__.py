@@ -18,4 +18,4 @@ __getattr__, __dir__, __all__ = attach(
     __name__, ["equations", "errata", "study", "report"],
     {**{n: "equations" for n in _EQUATIONS},
      **{n: "errata" for n in ("Erratum", "ERRATA", "CONFIRMED", "errata_table",
-                              "errata_markdown")}})
+                              "errata_markdown", "check_reading_b")}})

@@ -26,7 +26,7 @@ from .equations import (rate_2_2_printed, predict_2_2_printed, two_point_theta_p
                         discrete_model_printed, observation_printed,
                         observation_jacobian_printed, ann_neuron_printed)
 
-__all__ = ["Erratum", "ERRATA", "CONFIRMED", "errata_table", "errata_markdown"]
+__all__ = ["Erratum", "ERRATA", "CONFIRMED", "errata_table", "errata_markdown", "check_reading_b"]
 
 
 def _samples(n: int = 400, seed: int = 2013):
@@ -224,6 +224,25 @@ def _c_rotation_block():
 
 
 
+def _c_rotation_b():
+    """Reading B of 3.3-rotation: the printed block against R(theta) (the passage matrix)."""
+    pr, pl = _pairs("any")
+    th = _angle_to(pr, pl)
+    T = two_point_transform_printed(pl, th)[:, :2, :2]
+    c, s = np.cos(th), np.sin(th)
+    R = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
+    return _mx(T - R)
+
+
+
+def check_reading_b() -> float:
+    """Reading B of 3.3-transform: the printed translation column against p_l (m)."""
+    pr, pl = _pairs("any")
+    T = two_point_transform_printed(pl, _angle_to(pr, pl))
+    return _mx(T[:, :2, 3] - pl)
+
+
+
 def _c_laser_position():
     pose, _, _, _ = _samples()
     rigid = from_frame(pose, np.broadcast_to([ACFR_UTE.a, ACFR_UTE.b], (len(pose), 2)))[0]
@@ -375,8 +394,11 @@ ERRATA: list[Erratum] = [
             r"x' = V\cos\phi',\; y' = V\sin\phi'",
             r"\dot x = V\cos\phi,\; \dot y = V\sin\phi",
             "read literally, cos/sin of the heading RATE; compared with " + _FLOW
-            + " of the rear axle. Almost surely a stray derivative mark.",
-            "wrong equation", _c_rate22, _c_rate22_ok),
+            + " of the rear axle.",
+            "notation", _c_rate22, _c_rate22_ok,
+            "Counted as notation: read as a derivative mark slipped from x to phi, it is the "
+            "standard model, and the discrete model printed next to it uses phi (CONFIRMED "
+            "2.2-discrete). The check shows what the literal reading would do."),
     Erratum("2.2-symbols", "2.2", "symbols of the motion model",
             r"\dot\phi = v\tan\gamma / I;\; V, v;\; \gamma",
             r"\dot\phi = V\tan\alpha / L\;\text{(one speed } V\text{, wheelbase } L\text{, steering } \alpha \text{ as in 4.1)}",
@@ -394,7 +416,11 @@ ERRATA: list[Erratum] = [
             "onto the +x axis. 400 seeded point pairs.",
             "wrong equation", _c_transform, _c_transform_ok,
             "The paper never says which point is the origin; we take the left point (the "
-            "one whose coordinates appear in the printed column)."),
+            "one whose coordinates appear in the printed column). Wrong under both readings "
+            "of ijT_r (see 3.3-rotation): (A) the robot->landmark map, translation "
+            "-R(theta)^T p_l (checked above); (B) the 'matrice de passage' [R(theta) | p_l], "
+            "translation p_l itself, which the printed column misses too (check_reading_b). "
+            "Either way its two entries are identical, a misprint."),
     Erratum("3.3-theta-case3", "3.3", "third case of theta",
             r"\theta = \arctan\frac{y_r - y_l}{X_r - X_l} - \pi \;\text{si}\; X_l < X_r",
             r"... \;\text{si}\; X_l > X_r \quad(\theta = \mathrm{atan2}(y_r - y_l, x_r - x_l))",
@@ -421,7 +447,22 @@ ERRATA: list[Erratum] = [
             "change (geometry.to_frame) on 400 seeded pairs. The printed i is the first "
             "row of R(theta)(x_l, y_l), inconsistent with the R(theta)^T rotation block.",
             "wrong equation", _c_ij, _c_ij_ok,
-            "Same origin convention as 3.3-transform (left point)."),
+            "Same origin convention as 3.3-transform (left point). Under reading B of "
+            "3.3-rotation (i, j) would be p_l; the two identical printed formulas match "
+            "neither reading."),
+    Erratum("3.3-rotation", "3.3", "rotation block of ijT_r",
+            r"[\cos\theta, \sin\theta; -\sin\theta, \cos\theta] = R(\theta)^T",
+            r"\text{(A) as printed: } R(\theta)^T \text{ (robot} \to \text{landmark frame);}\; "
+            r"\text{(B) } R(\theta) \text{ (matrice de passage)}",
+            "reading A, the course's: R(theta)^T maps p_r - p_l onto the +x axis at length "
+            "|p_r - p_l| (check_correct, 0); reading B: the usual 'matrice de passage' holds "
+            "the new frame's axes as its COLUMNS, R(theta), and the printed block is its "
+            "transpose (check: largest entry of R(theta)^T - R(theta)). 400 seeded pairs.",
+            "ambiguous", _c_rotation_b, _c_rotation_block,
+            "The paper does not say which way ijT_r maps. The course takes (A), the reading "
+            "under which the printed rotation is right and the translation column wrong; under "
+            "(B) the rotation is the misprint, and the translation column is wrong as well "
+            "(3.3-transform)."),
     Erratum("3.3-names", "3.3", "names of the two points",
             r"R(x_r, y_r),\; R(x_l, y_l),\; x_1,\; X_r,\; \text{si},\; \text{cup}",
             r"P_r = (x_r, y_r),\; P_l = (x_l, y_l);\; x_l;\; \text{if};\; \text{cut}",
@@ -482,8 +523,21 @@ ERRATA: list[Erratum] = [
     Erratum("4.1-noise-map", "4.1", "input-noise mapping",
             r"[\omega_{\mu(k)}] = [\Delta f_{\mu(k-1)}(X,\mu)]\,\mu(k)",
             r"\omega(k-1) = \nabla_u f(X(k-1), u(k-1))\,\mu(k-1),\; \nabla_u f = G",
-            "notation: Delta for the gradient nabla and mixed time indices; G itself is "
-            "checked by finite differences in tests/test_kinematics.py.", "notation"),
+            "notation: Delta for the gradient nabla and mixed time indices, and the Jacobian "
+            "is taken with respect to the noise mu (df/dmu = d(x, y, phi)/d(mu_1, mu_2)) "
+            "instead of the input u; for noise added to the input the two are the same "
+            "matrix G = df/du at u. G itself is checked by finite differences in "
+            "tests/test_kinematics.py.", "notation"),
+    Erratum("4.1-vehicle-xy", "4.1", "vehicle coordinates",
+            r"(x_1, y_1)",
+            r"(x, y)",
+            "notation: 4.1 names the vehicle coordinates (x_1, y_1), the rest of the paper "
+            "(x, y); in 3.3 the same x_1 is the left point's x_l (3.3-names).", "notation"),
+    Erratum("4.1-z-symbols", "4.1", "symbols of the observation",
+            r"z(k) = (\gamma, \beta, I)",
+            r"z(k) = (r, \beta, \iota)\;\text{(range, bearing, intensity)}",
+            "notation: gamma, the steering angle of 2.2, is reused for the range, and I, the "
+            "wheelbase of 2.2's rate, for the intensity.", "notation"),
     Erratum("4.1-bearing", "4.1, 4.2", "bearing of the observation",
             r"\mathrm{atan}\left(\frac{y_l - y_i}{x_L - x_i}\right) - \theta + \frac{\pi}{2}",
             r"\mathrm{atan2}(y_i - y_L,\; x_i - x_L) - \phi + \frac{\pi}{2}",
@@ -515,6 +569,16 @@ ERRATA: list[Erratum] = [
             "difference between them on 400 seeded (w, x, b). A sign() unit has zero "
             "gradient, so it cannot be the back-propagation network the text describes.",
             "wrong equation", _c_ann),
+    Erratum("4.2-f-names", "4.2", "the letter f",
+            r"f(x) = \mathrm{sign}(\dots)\;\text{(neuron)};\; \chi_v(k+1) = f(\chi_v(k))",
+            r"g(x)\text{ for the neuron},\; f\text{ for the process model}",
+            "notation: two lines apart, f names the ANN neuron and the vehicle's process "
+            "model (whose Jacobian df/dchi_v = J_1 follows).", "notation"),
+    Erratum("4.2-vehicle-position", "4.2", "what (x, y) is",
+            r"(x, y)\text{ is the position of the vehicle}",
+            r"(x_L, y_L)\text{, the laser's position (4.1-Pl-scalar)}",
+            "notation: the range and bearing printed just above use the laser point "
+            "(x_L, y_L), not the vehicle's reference point (chapter 03).", "notation"),
     Erratum("4.2-model", "4.2", "augmented process model",
             r"\chi_v(k+1) = f(\chi_v(k))",
             r"\chi_v(k+1) = f(\chi_v(k), u(k)),\; \chi_L(k+1) = \chi_L(k)",
@@ -560,11 +624,6 @@ CONFIRMED: list[Erratum] = [
             r"x + \Delta t V\cos\phi,\; y + \Delta t V\sin\phi,\; \phi + \Delta t V\tan\gamma/L",
             "as printed", "one Euler step of the exact rear-axle arc: " + _EULER,
             "correct", _c_pred22),
-    Erratum("3.3-rotation", "3.3", "rotation block of ijT_r",
-            r"[\cos\theta, \sin\theta; -\sin\theta, \cos\theta]",
-            "as printed (= R(theta)^T)",
-            "it maps p_r - p_l onto the +x axis at length |p_r - p_l|, 400 seeded pairs.",
-            "correct", _c_rotation_block),
     Erratum("3.3-theta-cases", "3.3", "theta, cases 1 and 3 (condition fixed)",
             r"\arctan\frac{y_r - y_l}{x_r - x_l}\;(X_l < X_r),\; \dots - \pi\;(X_l > X_r)",
             r"= \mathrm{atan2}(y_r - y_l, x_r - x_l) \bmod 2\pi",

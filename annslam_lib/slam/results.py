@@ -59,7 +59,8 @@ class SlamResult:
     1 GPS), nis, dof (2 x observations), accepted (False: a GPS fix beyond its gate).
     counts: predicts (prediction steps), scans, scans_skipped (before the first odometry
     sample), updates (laser batch updates), gps_updates, gps_rejected, gps_skipped
-    (outside the GPS mode's window), observations, associated, new, rejected,
+    (outside the GPS mode's window), screen_* (what ``data.screening.screen`` repaired in
+    the streams on entry), observations, associated, new, rejected,
     out_of_range (per detection, summing to observations), landmarks_created,
     landmarks_removed (tentative ones deleted), landmarks (final).
     health: dict of arrays scan, t, n (state size), min_eig (smallest eigenvalue of P),

@@ -43,6 +43,7 @@ import numpy as np
 
 from ..data import filter_default_names
 from ..data.records import Dataset, Detections
+from ..data.screening import screen
 from ..evaluation.consistency import chi2_quantile
 from ..models.motion import control_table
 from ..perception.association import associate_fast
@@ -322,7 +323,7 @@ class _ScanStep:
 
 def _run(dataset, config, progress, backend, landmark_model=None) -> SlamResult:
     t_start = time.perf_counter()
-    ds = _resolve_dataset(dataset)
+    ds, screening = screen(_resolve_dataset(dataset))     # damaged streams: repaired, counted
     if config is None:
         config = SlamConfig.for_dataset(ds.name) if ds.name in filter_default_names() else SlamConfig()
     if not isinstance(config, SlamConfig):
@@ -367,7 +368,7 @@ def _run(dataset, config, progress, backend, landmark_model=None) -> SlamResult:
     health_rows = []
     counts = dict(predicts=0, scans=0, scans_skipped=0, gps_updates=0, gps_rejected=0,
                   gps_skipped=0, updates=0, observations=0, associated=0, new=0, rejected=0,
-                  out_of_range=0, landmarks_created=0, landmarks_removed=0)
+                  out_of_range=0, landmarks_created=0, landmarks_removed=0, **screening.counts())
 
     def checkpoint(scan: int, t: float) -> None:
         lo, asym = filt.health()
