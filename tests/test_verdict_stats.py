@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 import pytest
-from scipy import stats
+from scipy import linalg, stats
 
 from annslam_lib.evaluation import summary
 from annslam_lib.paper import study
@@ -74,6 +74,6 @@ def test_heldout_map_error_aligned_removes_the_frame_only():
     assert absolute > 0.15 > 0.06 > shape
     # by hand: align everything (Kabsch via scipy's orthogonal Procrustes), score the three
     a, b = noisy - noisy.mean(0), beacons - beacons.mean(0)
-    Rp, _ = __import__("scipy.linalg", fromlist=["orthogonal_procrustes"]).orthogonal_procrustes(a, b)
+    Rp, _ = linalg.orthogonal_procrustes(a, b)
     fit = a @ Rp + beacons.mean(0)
     assert shape == pytest.approx(np.sqrt(np.mean(np.sum((fit - beacons)[held] ** 2, 1))), rel=1e-9)

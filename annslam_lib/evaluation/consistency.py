@@ -17,7 +17,7 @@ import numpy as np
 from .. import _checks
 from ..data.records import Dataset
 from ..models.geometry import wrap_angle
-from ..models.uncertainty import chi2_quantile
+from ..models.uncertainty import chi2_quantile, mahalanobis2
 
 __all__ = ["chi2_quantile", "chi2_band", "Consistency", "nees_consistency", "scan_nis",
            "nis_consistency", "pose_nees", "map_nees", "MapConsistency", "map_consistency",
@@ -200,13 +200,11 @@ def map_nees(result, dataset: Dataset) -> tuple[float, int]:
     if np.any(ids < 0):
         raise ValueError(f"{int(np.sum(ids < 0))} landmark(s) match no true beacon: "
                          "the map NEES is defined for a map without spurious landmarks")
-    e = (np.asarray(result.landmarks) - np.asarray(beacons)[ids]).ravel()
+    est, truth = np.asarray(result.landmarks).ravel(), np.asarray(beacons)[ids].ravel()
     P = np.asarray(result.covariance)[3:, 3:]
-    if P.shape != (e.size, e.size):
+    if P.shape != (est.size, est.size):
         raise ValueError(f"covariance block {P.shape} does not match {ids.size} landmarks")
-    L = np.linalg.cholesky(0.5 * (P + P.T))
-    w = np.linalg.solve(L, e)
-    return float(w @ w), int(e.size)
+    return float(mahalanobis2(est[None], truth, P)[0]), int(est.size)
 
 
 @dataclass(frozen=True)

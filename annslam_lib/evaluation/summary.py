@@ -25,7 +25,7 @@ import numpy as np
 
 from .. import _checks
 from ..data.records import Dataset
-from .map import MapErrors, map_errors, match_landmarks, point_rmse, rigid_align
+from .map import MapErrors, map_errors, match_landmarks, point_rmse
 from .trajectory import trajectory_errors
 
 __all__ = ["METRICS", "RunMetrics", "run_metrics", "pose_trace", "nis_per_dof",
@@ -111,20 +111,29 @@ def nis_per_dof(result) -> float:
 def heldout_map_rmse(result, beacons, held_out, max_distance: float = 1.0, *,
                      aligned: bool = False) -> float:
     """Map RMSE (m) over the surveyed beacons ``held_out`` (indices into ``beacons``) that
-    the map matches (``evaluation.map.match_landmarks``); NaN if none is. ``aligned``: after
-    the best rigid alignment of the WHOLE matched map onto the survey (its frame removed,
-    ``evaluation.map.rigid_align``; NaN with fewer than 2 matches), else absolute."""
+    the map matches; NaN if none is. Absolute: matched as mapped
+    (``evaluation.map.match_landmarks``). ``aligned``: the pairs and the frame of
+    ``evaluation.map.map_errors`` (the WHOLE map aligned onto the survey first; NaN when it
+    cannot be aligned)."""
+    if aligned:
+        try:
+            m = map_errors(result.landmarks, beacons, max_distance=max_distance)
+        except ValueError:
+            return math.nan
+        return _heldout_aligned(m, held_out)
     i, j = match_landmarks(result.landmarks, beacons, max_distance)
     sel = np.isin(j, np.asarray(held_out))
     if not sel.any():
         return math.nan
-    pts = np.asarray(result.landmarks, dtype=float)[i]
-    if aligned:
-        if i.size < 2:
-            return math.nan
-        R, t = rigid_align(pts, beacons[j])
-        pts = pts @ R.T + t
-    return point_rmse(pts[sel], beacons[j[sel]])
+    return point_rmse(result.landmarks[i[sel]], beacons[j[sel]])
+
+
+def _heldout_aligned(m: MapErrors | None, held_out) -> float:
+    """RMSE over the held-out beacons of an aligned map's errors (NaN: none, or no map)."""
+    if m is None:
+        return math.nan
+    sel = np.isin(m.j_true, np.asarray(held_out))
+    return float(np.sqrt(np.mean(m.error_aligned[sel] ** 2))) if sel.any() else math.nan
 
 
 def _traj_rmse(traj, gps) -> tuple[float, float]:
@@ -162,6 +171,7 @@ def run_metrics(result, dataset: Dataset, *, t_heldout: float | None = None,
         n_map, n_true = int(result.landmarks.shape[0]), len(dataset.beacons)
         out.update(matched=int(i.size), missed=n_true - int(i.size), spurious=n_map - int(i.size),
                    duplicates=0)
+        m = None
         if n_map >= 2:
             try:                           # aligned first: a map in a wrong frame is scored too
                 m = map_errors(result.landmarks, dataset.beacons, max_distance=max_distance)
@@ -171,7 +181,7 @@ def run_metrics(result, dataset: Dataset, *, t_heldout: float | None = None,
                 out.update(map_errors=m, duplicates=m.duplicates, map_rmse=m.rmse,
                            map_rmse_aligned=m.rmse_aligned)
         if held_out_beacons is not None:
-            for key, al in (("map_rmse_heldout", False), ("map_rmse_heldout_aligned", True)):
-                out[key] = heldout_map_rmse(result, dataset.beacons, held_out_beacons,
-                                            max_distance, aligned=al)
+            out["map_rmse_heldout"] = heldout_map_rmse(result, dataset.beacons, held_out_beacons,
+                                                       max_distance)
+            out["map_rmse_heldout_aligned"] = _heldout_aligned(m, held_out_beacons)
     return RunMetrics(**out)

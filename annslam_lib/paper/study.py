@@ -63,8 +63,7 @@ from ..slam.runner import run
 
 __all__ = ["CONFIGURATIONS", "natural_config", "Study", "study", "fast_dataset", "Transfer",
            "transfer", "verdict", "DECISION_RULE", "Paired", "paired", "paired_values",
-           "SCALES",
-           "r_scale_summary", "r_scale_sweep",
+           "SCALES", "r_scale_summary", "r_scale_sweep",
            "equivalent_scale", "reference_from_study"]
 
 #: Rows of the results table, in order: key -> (label, landmark source).
