@@ -7,11 +7,11 @@ Use ./course.sh refresh, which fixes the BLAS thread count first: stored outputs
 are compared digit for digit by strict nbval.
 """
 import sys
-import time
 from pathlib import Path
 
 import nbformat
-from nbclient import NotebookClient
+
+from annslam_lib.course import kernels
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -22,11 +22,9 @@ def refresh(path: Path) -> float:
         if cell.cell_type == "code":
             cell.outputs, cell.execution_count = [], None
             cell.metadata.pop("execution", None)
-    t0 = time.perf_counter()
-    NotebookClient(nb, timeout=900, kernel_name="python3", record_timing=False,
-                   resources={"metadata": {"path": str(path.parent)}}).execute()
+    seconds = kernels.run_notebook(nb, path.parent, timeout=900)
     nbformat.write(nb, path)
-    return time.perf_counter() - t0
+    return seconds
 
 
 def main(argv: list[str]) -> int:

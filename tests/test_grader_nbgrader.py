@@ -75,13 +75,21 @@ def test_nbgrader_autograde_and_the_course_grader_agree(tmp_path):
     for student, make in SUBMISSIONS.items():
         gs.write(make(), course / "submitted" / student / "chapter" / "chapter.ipynb")
     # nbgrader runs helper executables (alembic) from PATH: this venv's bin first
-    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}"}
+    mark = tmp_path / "clients.txt"
+    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}",
+           "PYTHONPATH": str(Path(__file__).parent), "ANNSLAM_CLIENT_MARK": str(mark)}
+    # the README's one line that gives nbgrader's autograde the course's stall-proof client
+    (course / "nbgrader_config.py").write_text(
+        'c = get_config()  # noqa: F821\n'
+        'c.AsyncKernelManager.client_class = "grading_support.MarkedKernelClient"\n')
     _nbgrader(course, "db", "assignment", "add", "chapter", env=env)
     for student in SUBMISSIONS:
         _nbgrader(course, "db", "student", "add", student, env=env)
     _nbgrader(course, "generate_assignment", "chapter", "--force", env=env)
     out = _nbgrader(course, "autograde", "chapter", "--force", env=env, check=False)
     assert "error processing assignment 'chapter' for student 'bonus'" in out.stderr
+    made = mark.read_text().split()                  # one client per graded submission
+    assert len(made) >= len(SUBMISSIONS) - 1 and set(made) == {"CourseKernelClient"}, made
     from nbgrader.api import Gradebook, MissingEntry
 
     with Gradebook(f"sqlite:///{course / 'gradebook.db'}") as gb:

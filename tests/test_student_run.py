@@ -1,6 +1,7 @@
 """Run All in every student version reaches the last cell (the README's promise).
 
-Each student version (the course's release) is executed top to bottom with nbclient,
+Each student version (the course's release) is executed top to bottom with nbclient (the
+course's client, :mod:`annslam_lib.course.kernels`: a stalled client fails loudly),
 ``allow_errors=False``: only the autograded test cells may raise (they carry the
 ``raises-exception`` tag that JupyterLab's Run All and nbclient honour), each with the
 grading message "my_... is not written yet", shown as the message alone (GradingError's
@@ -11,11 +12,9 @@ from pathlib import Path
 
 import nbformat
 import pytest
-from nbclient import NotebookClient
 
-
+from annslam_lib.course import kernels, release
 from annslam_lib.grading import NOT_WRITTEN
-from annslam_lib.course import release
 
 ROOT = Path(__file__).resolve().parents[1]
 GRADED = [p for p in sorted((ROOT / "notebooks").glob("*.ipynb")) if release.exercises(p)]
@@ -43,8 +42,7 @@ def _is_test(cell) -> bool:
 @pytest.mark.parametrize("path", GRADED, ids=lambda p: p.stem)
 def test_run_all_reaches_the_end_and_only_the_exercises_say_not_written(path, student):
     nb = nbformat.read(student[path.name], as_version=4)
-    NotebookClient(nb, timeout=300, kernel_name="python3", allow_errors=False,
-                   resources={"metadata": {"path": str(student[path.name].parent)}}).execute()
+    kernels.run_notebook(nb, student[path.name].parent, timeout=300)
     code = [c for c in nb.cells if c.cell_type == "code"]
     assert code[-1].get("execution_count") is not None, "Run All did not reach the last cell"
     errors = {i: o for i, c in enumerate(nb.cells) if c.cell_type == "code"

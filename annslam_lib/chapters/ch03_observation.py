@@ -19,6 +19,7 @@ from ipywidgets import FloatSlider, interactive
 
 from .. import _checks
 from ..models.geometry import wrap_angle
+from ..evaluation.residuals import ROUNDING
 from ..models.observation import observe
 from ..plots.style import figure, show_widget_figure, widget_figure
 from ..models.uncertainty import coverage, draw_ellipse, expected_coverage, monte_carlo, propagate
@@ -185,9 +186,12 @@ def measurement_explorer(*, landmark=(10.0, 3.0), sigma_xy: float = 0.3,
 
 def jacobian_sparsity_figure(H_full, n_landmarks: int, seen: int):
     """Which entries of the full observation Jacobian dh/dX are non-zero for a sighting of
-    landmark ``seen`` (numbered from 1) in a state of ``n_landmarks`` landmarks."""
+    landmark ``seen`` (numbered from 1) in a state of ``n_landmarks`` landmarks. An entry
+    at rounding level (below ``residuals.ROUNDING`` times the largest) is a structural zero
+    (d range / d phi computes to 0 or to 1e-17, depending on the CPU): drawn as zero."""
+    H = np.abs(np.asarray(H_full, dtype=float))
     fig, ax = figure(height=2.4)
-    ax.imshow(np.asarray(H_full) != 0, cmap="Greys", vmin=0, vmax=1.6, aspect="equal")
+    ax.imshow(H > ROUNDING * H.max(), cmap="Greys", vmin=0, vmax=1.6, aspect="equal")
     labels = ["x", "y", "φ"] + [f"{c}{k}" for k in range(1, n_landmarks + 1) for c in ("x", "y")]
     ax.set_xticks(range(len(labels)), labels)
     ax.set_yticks([0, 1], ["range", "bearing"])

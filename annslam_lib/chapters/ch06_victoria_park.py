@@ -20,6 +20,7 @@ from matplotlib.collections import LineCollection
 
 from ..data.records import Gps
 from ..evaluation.trajectory import TrajectoryErrors, trajectory_errors
+from ..evaluation.residuals import ROUNDING, bound_text
 from ..models.uncertainty import ellipse_curves
 from ..plots.style import FIG_WIDTH, figure, show_widget_figure, widget_figure
 from ..plots.style import notebook_setup as setup
@@ -257,11 +258,20 @@ def slam_vs_dead_reckoning_figure(gps: Gps, outliers, dead_reckoned, result: Sla
 
 
 def health_figure(health: dict, steps):
-    """Asymmetry and smallest eigenvalue of P over the steps, one line per update form."""
+    """Asymmetry and smallest eigenvalue of P over the steps, one line per update form.
+    Asymmetry below ``residuals.ROUNDING`` is rounding, whose digits depend on the CPU: it
+    is drawn as the grey band it lies in, not as points."""
     fig, (a1, a2) = figure(1, 2, height=3.8)
+    a1.axhspan(1e-15, ROUNDING, color="0.92", zorder=0)
     for name, hist in health.items():
-        a1.semilogy(steps, hist[:, 0], "o-", ms=3, label=name)
+        (line,) = a1.semilogy(steps, np.where(hist[:, 0] < ROUNDING, np.nan, hist[:, 0]), "o-",
+                              ms=3, label=name)
         a2.plot(steps, hist[:, 1], "o-", ms=3, label=name)
+        if np.all(hist[:, 0] < ROUNDING):
+            a1.text(np.mean(steps), 1e-13, f"{name}: below {bound_text(ROUNDING)} at every "
+                    "step\n(rounding: its digits depend on the CPU)", color=line.get_color(),
+                    ha="center", va="center", fontsize=8)
+    a1.set_ylim(1e-15, None)
     a1.set(xlabel="steps", ylabel="max |P - P^T|", title="asymmetry")
     a2.axhline(0, color="k", lw=0.8)
     a2.set(xlabel="steps", ylabel="smallest eigenvalue of (P + P^T)/2", title="positive definiteness")

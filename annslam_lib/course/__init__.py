@@ -7,7 +7,9 @@
 - ``sandbox``: the kernel that runs student code (bubblewrap, limits, time-outs, deadline)
 - ``codec``: data, never code, between the grader and that kernel
 - ``kernel_side``: the grader's small helper inside the kernel
+- ``kernels``: Run All on a fresh kernel with a client that cannot stall silently
 - ``cli``: ``python -m annslam_lib ...``
 """
 
-__all__ = ["release", "workspace", "grader", "plan", "sandbox", "codec", "kernel_side", "cli"]
+__all__ = ["release", "workspace", "grader", "plan", "sandbox", "codec", "kernel_side",
+           "kernels", "cli"]

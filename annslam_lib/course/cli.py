@@ -153,14 +153,19 @@ def _add_release(sub) -> None:
 
 
 def _grade(args: argparse.Namespace) -> int:
-    from .grader import grade_batch
+    from .grader import GradingEnvironmentError, grade_batch
     from .sandbox import Limits
 
     limits = Limits(cpu_seconds=int(args.cpu), memory_bytes=int(args.memory * (1 << 30)),
                     cell_timeout=float(args.timeout), call_timeout=float(args.call_timeout),
                     deadline=float(args.deadline))
-    results = grade_batch(args.submissions, instructor_dir=args.instructor, json_path=args.json,
-                          limits=limits, isolation=args.isolation)
+    try:
+        results = grade_batch(args.submissions, instructor_dir=args.instructor,
+                              json_path=args.json, limits=limits, isolation=args.isolation)
+    except GradingEnvironmentError as e:
+        print(f"annslam grade: the grading environment is broken, so no submission was "
+              f"scored from here on: {e}", file=sys.stderr)
+        return 3
     bad = [r for r in results if not r.graded]
     total = len(results)
     print(f"graded {total - len(bad)} of {total} submission(s)"
@@ -190,7 +195,8 @@ def _add_grade(sub) -> None:
                        "sandboxed kernel with limits, and every test cell (hidden tests "
                        "included) is run by the grader with the student's functions behind "
                        "proxies. A submission that cannot be graded is reported with its "
-                       "reason and the others go on. Exit code 1 if any could not be graded.")
+                       "reason and the others go on. Exit code 1 if any could not be graded, 3 if the "
+                       "grading environment itself is broken (named; no score given).")
     p.add_argument("submissions", nargs="+", metavar="SUBMISSION",
                    help="notebooks, or folders to search (e.g. an nbgrader submitted/ folder: "
                         "submitted/<student>/<assignment>/<notebook>.ipynb)")

@@ -52,10 +52,11 @@ from ..grading.core import GradingError, forbidden, forbidden_message
 from . import codec
 from .plan import (CODE_STUB, GradePlan, PlannedCell, _defined_names, _meta, _read_notebook,
                    free_names, plan, static_forbidden)
-from .sandbox import ExecResult, Limits, Sandbox
+from .sandbox import ExecResult, GradingEnvironmentError, KernelStartError, Limits, Sandbox
 
-__all__ = ["ExerciseResult", "SubmissionGrade", "grade_submission",
-           "grade_batch", "RemoteFunction", "student_of", "CODE_STUB"]
+__all__ = ["ExerciseResult", "SubmissionGrade", "grade_submission", "grade_batch",
+           "check_environment", "GradingEnvironmentError", "RemoteFunction", "student_of",
+           "CODE_STUB"]
 
 ROOT = Path(__file__).resolve().parents[2]
 MAX_RESTARTS = 4
@@ -247,10 +248,16 @@ class _Session:
         self.calls = 0
         self.helper_error = ""
 
-    def _after_start(self) -> None:
+    def _after_start(self, first: bool) -> None:
         res = self.sandbox.execute("import annslam_lib.course.kernel_side as __annslam_kernel__",
                                    60)
         self.helper_error = "" if res.ok else res.reason()
+        if first and not res.ok:          # no student code has run yet: not the student's fault
+            said = self.sandbox.kernel_log(0)
+            raise GradingEnvironmentError(
+                "the course's library cannot be imported in the grading kernel (before any "
+                f"student code ran): {res.reason()}" + (f"; the kernel said: {said}" if said
+                                                         else ""))
 
     def run_all(self) -> None:
         """Run the course and solution cells in order (test cells run in the grader)."""
@@ -275,8 +282,14 @@ class _Session:
                 raise _KernelGone(f"the kernel died {self.restarts + 1} times; the rest of the "
                                   "notebook cannot be graded")
             self.restarts += 1
-        self.sandbox.start()
-        self._after_start()
+        first = not self.sandbox.kernels_started
+        try:
+            self.sandbox.start()
+        except KernelStartError as e:
+            if first:                     # nothing of the student's has run: the machine's fault
+                raise GradingEnvironmentError(str(e)) from None
+            raise _KernelGone(str(e)) from None
+        self._after_start(first)
         for k in sorted(self.status):
             if self.status[k].ok:
                 res = self.sandbox.execute(self.plan.cells[k].source)
@@ -424,7 +437,9 @@ def grade_submission(path, instructor, *, limits: Limits = Limits(), isolation: 
                      hide=(), guard=None) -> SubmissionGrade:
     """Grade one submitted notebook against the instructor notebook ``instructor`` (a path).
     Never raises for a bad submission: an ungradable one comes back with ``graded=False``
-    and its reason. ``guard``: folders whose files must not change (checked and restored
+    and its reason. Raises :class:`GradingEnvironmentError` when the grading machine is at
+    fault (no sandbox, a kernel that cannot start or import the library before any student
+    code ran): that is never a student's score. ``guard``: folders whose files must not change (checked and restored
     when the sandbox cannot guarantee it)."""
     t0 = time.monotonic()
     path = Path(path).resolve()
@@ -458,6 +473,8 @@ def grade_submission(path, instructor, *, limits: Limits = Limits(), isolation: 
             session = _Session(sb, gplan)
             try:
                 session.run_all()
+            except GradingEnvironmentError:
+                raise
             except (_KernelGone, TimeoutError, RuntimeError) as e:
                 g.notes.append(f"the notebook could not be run to its end: {e}")
             for k, c in enumerate(gplan.cells):
@@ -473,6 +490,8 @@ def grade_submission(path, instructor, *, limits: Limits = Limits(), isolation: 
             if session.restarts:
                 g.notes.append(f"the kernel was restarted {session.restarts} time(s) and the "
                                "notebook's good cells replayed")
+    except GradingEnvironmentError:      # the machine's fault: the caller stops, no score
+        raise
     except Exception as e:               # the grader's own trouble: say so, never a score
         g.graded, g.reason = False, f"grading failed: {type(e).__name__}: {e}"
     finally:
@@ -502,6 +521,29 @@ def _submissions(args) -> list[Path]:
     return out
 
 
+def check_environment(*, limits: Limits = Limits(), isolation: str = "auto",
+                      hide=()) -> str:
+    """Start a grading kernel with no student code, import the course's library and NumPy in
+    it, and return the isolation used; raise :class:`GradingEnvironmentError` naming the
+    cause if any of it fails (bubblewrap refused, an interpreter or library the sandbox
+    hides, a broken install)."""
+    probe = ("import os, numpy, annslam_lib, annslam_lib.course.kernel_side\n"
+             "assert annslam_lib.__file__.startswith(os.path.dirname(os.getcwd())), "
+             "f'the kernel imported {annslam_lib.__file__}, not the snapshot'")
+    with Sandbox(limits, isolation=isolation, hide=hide) as sb:
+        try:
+            sb.start()
+        except KernelStartError as e:
+            raise GradingEnvironmentError(str(e)) from None
+        res = sb.execute(probe, 120)
+        if not res.ok:
+            said = sb.kernel_log(0)
+            raise GradingEnvironmentError(
+                "the course's library cannot be imported in the grading kernel: "
+                f"{res.reason()}" + (f"; the kernel said: {said}" if said else ""))
+        return sb.isolation
+
+
 def grade_batch(paths, *, instructor_dir=None, json_path=None, limits: Limits = Limits(),
                 isolation: str = "auto", log=print) -> list[SubmissionGrade]:
     """Grade every submission in ``paths`` (files, or folders searched for notebooks) against
@@ -516,6 +558,8 @@ def grade_batch(paths, *, instructor_dir=None, json_path=None, limits: Limits = 
     if fetch.data_dir().exists():
         guard.append(fetch.data_dir())
     results = []
+    if any(p.exists() for p in subs):
+        check_environment(limits=limits, isolation=isolation, hide=hide)
     for p in subs:
         inst = inst_dir / p.name
         if not p.exists():

@@ -6,14 +6,20 @@ imports instead of the instructor's editable source. The kernel is started:
 
 - inside **bubblewrap** when ``bwrap`` is installed and works here (Debian's
   ``bubblewrap``): the whole file system read-only, ``/tmp`` and the instructor's and other
-  submissions' folders replaced by empty ones, only the scratch folder writable, no network
-  (its own network namespace; the grader talks to it over Unix sockets in the scratch
-  folder), its own PID namespace, killed with the grader;
+  submissions' folders replaced by empty ones, then the interpreter (its prefixes and every
+  link from ``sys.executable`` to the real binary) and the data bound back read-only
+  wherever they lie, so a course cloned into ``/tmp`` grades as anywhere else; only the
+  scratch folder writable, no network (its own network namespace; the grader talks to it
+  over Unix sockets in the scratch folder), its own PID namespace, killed with the grader;
 - otherwise, when the grader runs as root and the interpreter is readable by others, as
   the unprivileged user ``nobody`` (it can then write nowhere but the scratch folder);
   otherwise as the grader's own user: it could then
   write wherever that user can, which :mod:`annslam_lib.course.grader` detects afterwards
   (a hash of the course's files before and after) and undoes, and the README says so.
+
+A kernel that cannot start raises :class:`KernelStartError` with what it wrote; the grader
+turns the first one of a submission (no student code has run yet) into a
+:class:`GradingEnvironmentError`, the machine's fault, never a score.
 
 In every case the kernel process has resource limits (``setrlimit``: CPU seconds, address
 space, largest file written, no core dumps), each execution a time-out, and the whole
@@ -37,8 +43,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["Limits", "ExecResult", "Sandbox", "bwrap_available", "nobody_available",
-           "ISOLATIONS"]
+__all__ = ["Limits", "ExecResult", "Sandbox", "GradingEnvironmentError", "KernelStartError",
+           "bwrap_available", "bwrap_problem", "nobody_available", "interpreter_paths", "ISOLATIONS"]
 
 LIB = Path(__file__).resolve().parents[1]          # the annslam_lib package
 ISOLATIONS = ("auto", "bwrap", "nobody", "none")
@@ -63,6 +69,16 @@ if lim.get("uid") is not None:
 os.environ.pop("JPY_PARENT_PID", None)
 os.execv(sys.executable, [sys.executable, "-m", "ipykernel_launcher", *sys.argv[2:]])
 """
+
+
+class GradingEnvironmentError(RuntimeError):
+    """The grading machine, not the submission, is at fault: the sandbox cannot be made, or
+    a kernel with no student code in it cannot start or import the course's library. Never
+    turned into a student's score: the grade command stops and names the cause."""
+
+
+class KernelStartError(RuntimeError):
+    """A kernel of the sandbox did not start (the first one: the environment's fault)."""
 
 
 @dataclass(frozen=True)
@@ -100,19 +116,55 @@ class ExecResult:
         return self.evalue
 
 
-@functools.lru_cache(maxsize=1)
 def bwrap_available() -> str | None:
-    """Path of a working ``bwrap`` (tried once: user namespaces may be disabled), or None."""
+    """Path of a working ``bwrap`` (tried once: user namespaces may be disabled), or None;
+    :func:`bwrap_problem` says why not."""
+    exe, _ = _bwrap_probe()
+    return exe
+
+
+def bwrap_problem() -> str:
+    """Why bubblewrap cannot be used here ('' when it can)."""
+    return _bwrap_probe()[1]
+
+
+@functools.lru_cache(maxsize=1)
+def _bwrap_probe() -> tuple[str | None, str]:
     exe = shutil.which("bwrap")
     if exe is None:
-        return None
+        return None, "bwrap is not installed (Debian's package bubblewrap)"
     try:
-        ok = subprocess.run([exe, "--ro-bind", "/", "/", "--dev", "/dev", "--proc", "/proc",
-                             "--unshare-net", "--unshare-pid", "--die-with-parent", "true"],
-                            capture_output=True, timeout=20).returncode == 0
-    except (OSError, subprocess.TimeoutExpired):
-        ok = False
-    return exe if ok else None
+        r = subprocess.run([exe, "--ro-bind", "/", "/", "--dev", "/dev", "--proc", "/proc",
+                            "--unshare-net", "--unshare-pid", "--die-with-parent", "true"],
+                           capture_output=True, timeout=20)
+    except (OSError, subprocess.TimeoutExpired) as e:
+        return None, f"{exe} could not be run: {e}"
+    if r.returncode != 0:
+        last = (r.stderr.decode(errors="replace").strip().splitlines() or ["?"])[-1]
+        return None, (f"{exe} is installed but may not create a sandbox here (exit code "
+                      f"{r.returncode}: {last[:200]}); user namespaces may be disabled")
+    return exe, ""
+
+
+def interpreter_paths() -> list[Path]:
+    """Every folder the kernel's interpreter needs: the environment's prefixes and the
+    folders of each link from ``sys.executable`` to the real binary (a venv's python is a
+    link to its base interpreter, which may lie in a temporary folder too)."""
+    found = [Path(p) for p in {sys.prefix, sys.base_prefix, sys.exec_prefix,
+                                sys.base_exec_prefix}]
+    exe = Path(sys.executable)
+    for _ in range(40):                           # follow the chain of links, hop by hop
+        found.append(exe.parent)
+        if not exe.is_symlink():
+            break
+        exe = exe.parent / os.readlink(exe)
+    found.append(Path(os.path.realpath(sys.executable)).parent)
+    out = []
+    for p in found:
+        for q in (p.absolute(), p.resolve()):
+            if q.exists() and q not in out:
+                out.append(q)
+    return out
 
 
 @functools.lru_cache(maxsize=1)
@@ -165,9 +217,10 @@ class Sandbox:
             isolation = ("bwrap" if bwrap_available() else
                          "nobody" if nobody_available() is None else "none")
         if isolation == "bwrap" and not bwrap_available():
-            raise RuntimeError("bubblewrap (bwrap) is not available or does not work here")
+            raise GradingEnvironmentError(f"isolation 'bwrap' is not possible here: "
+                                          f"{bwrap_problem()}")
         if isolation == "nobody" and (why := nobody_available()) is not None:
-            raise RuntimeError(f"isolation 'nobody' is not possible here: {why}")
+            raise GradingEnvironmentError(f"isolation 'nobody' is not possible here: {why}")
         self.isolation = isolation
         self.limits = limits
         self.hide = [Path(h).resolve() for h in hide]
@@ -192,19 +245,23 @@ class Sandbox:
 
     # ------------------------------------------------------------------ kernel life
     def _prefix(self) -> list[str]:
+        """bubblewrap's arguments: everything read-only, /tmp, /dev/shm and the hidden
+        folders empty, then the interpreter and the data bound back read-only wherever
+        they lie (under /tmp too), and the scratch folder writable. Mounts are applied
+        shallow before deep, so a folder inside a hidden one stays visible if the kernel
+        needs it, and a hidden folder inside a needed one stays hidden."""
         if self.isolation != "bwrap":
             return []
-        args = [bwrap_available(), "--ro-bind", "/", "/", "--dev", "/dev", "--proc", "/proc",
-                "--tmpfs", "/tmp", "--tmpfs", "/dev/shm"]
         from ..data import fetch
-
-        data = fetch.data_dir().resolve()
-        keep = [Path(sys.prefix).resolve(), LIB.parent, data]
-        for h in self.hide:
-            if h.exists() and not any(k == h or h in k.parents for k in keep):
-                args += ["--tmpfs", str(h)]
-        if data.exists():                       # even if it lies under /tmp: read-only
-            args += ["--ro-bind", str(data), str(data)]
+        mounts = [("--tmpfs", Path("/tmp")), ("--tmpfs", Path("/dev/shm"))]
+        mounts += [("--tmpfs", h) for h in self.hide if h.exists()]
+        data = fetch.data_dir()
+        mounts += [("--ro-bind", p) for p in [*interpreter_paths(), data.absolute(),
+                                              data.resolve()] if p.exists()]
+        mounts.sort(key=lambda m: len(m[1].parts))          # stable: shallow first
+        args = [bwrap_available(), "--ro-bind", "/", "/", "--dev", "/dev", "--proc", "/proc"]
+        for kind, p in mounts:
+            args += [kind, str(p)] if kind == "--tmpfs" else [kind, str(p), str(p)]
         args += ["--bind", str(self.root), str(self.root), "--unshare-net", "--unshare-pid",
                  "--unshare-ipc", "--unshare-uts", "--die-with-parent", "--chdir",
                  str(self.work), "--"]
@@ -258,12 +315,23 @@ class Sandbox:
         except RuntimeError as e:          # the kernel died while starting
             code = km.provisioner.process.poll() if km.provisioner else None
             kc.stop_channels()
+            with contextlib.suppress(Exception):
+                km.shutdown_kernel(now=True)
             km.cleanup_resources()
-            raise RuntimeError(f"the grading kernel did not start: {_describe_exit(code)} "
-                               f"({e})") from None
+            said = self.kernel_log(self.kernels_started)
+            raise KernelStartError(f"the grading kernel did not start: {_describe_exit(code)} "
+                                   f"({e})" + (f"; it said: {said}" if said else "")) from None
         self.km, self.kc = km, kc
         self.kernels_started += 1
         self.dead_reason = ""
+
+    def kernel_log(self, k: int, lines: int = 4) -> str:
+        """The last lines kernel number ``k`` wrote to its stdout and stderr."""
+        try:
+            text = (self.root / f"kernel-{k}.log").read_text(errors="replace")
+        except OSError:
+            return ""
+        return " | ".join(x.strip() for x in text.strip().splitlines()[-lines:] if x.strip())
 
     def stop(self) -> None:
         if self.kc is not None:

@@ -6,6 +6,8 @@
 - ``summary``: ``run_metrics``, the one summary of a run every table uses
 - ``timing``: per-step cost of the efficient and dense filters
 - ``calibration``: noise values read off the data (the GPS's own scatter)
+- ``residuals``: how a residual that should be zero is shown (a bound, not its digits)
 """
 
-__all__ = ["trajectory", "map", "consistency", "summary", "timing", "calibration"]
+__all__ = ["trajectory", "map", "consistency", "summary", "timing", "calibration",
+           "residuals"]

@@ -16,6 +16,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..evaluation.residuals import DIFFERENCES, residual
 from ..models import motion as kinematics
 from ..models import observation
 from ..models.geometry import from_frame, to_frame, wrap_angle
@@ -685,7 +686,11 @@ def errata_table(entries=None) -> list[dict]:
 
 
 def _fmt_error(x: float | None) -> str:
-    return "—" if x is None else f"{x:.2g}"
+    # A discrepancy below the checks' resolution is rounding or finite-difference noise,
+    # whose digits depend on the CPU: shown as the bound (evaluation.residuals).
+    if x is None:
+        return "—"
+    return residual(x, DIFFERENCES) if abs(x) < DIFFERENCES else f"{x:.2g}"
 
 
 def _cell(text: str) -> str:
@@ -696,7 +701,9 @@ def _cell(text: str) -> str:
 def errata_markdown(entries=None, *, formulas: str = "inline") -> str:
     """The errata as a Markdown table (the README's table is this output, tested):
     section, quantity, printed form, correct form, kind, and the measured
-    discrepancy of the printed and the corrected form (see :class:`Erratum`).
+    discrepancy of the printed and the corrected form (see :class:`Erratum`); one below
+    the checks' resolution (1e-7, central differences) is written "below 1e-7", since its
+    digits are rounding noise that changes with the CPU.
 
     ``formulas="below"`` (the chapters' form) keeps the table narrow, section, quantity,
     kind and the two discrepancies, and lists the printed and correct formulas under it,

@@ -1,0 +1,91 @@
+"""Run a command and report how long its process tree sat idle: a stall shows as minutes at
+near-zero CPU while nothing finishes.
+
+    python benchmarks/idle_monitor.py [--threshold 0.05] [--log FILE] -- COMMAND ...
+
+Samples the CPU seconds of the command and all its descendants once a second. An idle
+stretch is a run of seconds in which the whole tree used less than ``--threshold`` of one
+CPU. Prints the command's output as it comes, then: wall seconds, CPU seconds of the tree,
+the longest idle stretch (start, length, the processes alive then), and the count of idle
+stretches over 60 s. Exits with the command's exit code. Not a test: a measurement.
+"""
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import threading
+import time
+
+import psutil
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--threshold", type=float, default=0.05)
+    ap.add_argument("--log", help="also write one line per second (t, CPU share) here")
+    ap.add_argument("command", nargs=argparse.REMAINDER)
+    args = ap.parse_args(argv)
+    cmd = args.command[1:] if args.command[:1] == ["--"] else args.command
+    t0 = time.monotonic()
+    proc = subprocess.Popen(cmd)
+    root = psutil.Process(proc.pid)
+    samples: list[tuple[float, float, list[str]]] = []      # (t, share of one CPU, alive)
+    done = threading.Event()
+
+    def sample():
+        # Linux adds a reaped child's CPU (and its reaped children's) to its parent's
+        # children_* times: the alive processes' own and children's times count everything
+        # but orphans.
+        last_total, last_t = 0.0, time.monotonic()
+        while not done.wait(1.0):
+            now = time.monotonic()
+            try:
+                procs = [root, *root.children(recursive=True)]
+            except psutil.Error:
+                break
+            total, alive = 0.0, []
+            for p in procs:
+                try:
+                    ct = p.cpu_times()
+                    total += ct.user + ct.system + ct.children_user + ct.children_system
+                    alive.append(" ".join(p.cmdline()[:4])[:120])
+                except psutil.Error:
+                    pass
+            share = max(0.0, total - last_total) / max(now - last_t, 1e-9)
+            samples.append((now - t0, share, alive))
+            last_total, last_t = max(total, last_total), now
+
+    th = threading.Thread(target=sample, daemon=True)
+    th.start()
+    code = proc.wait()
+    done.set()
+    th.join(5)
+    wall = time.monotonic() - t0
+    stretches, start = [], None
+    for k, (t, share, _) in enumerate(samples):
+        if share < args.threshold and start is None:
+            start = k
+        elif share >= args.threshold and start is not None:
+            stretches.append((start, k))
+            start = None
+    if start is not None:
+        stretches.append((start, len(samples)))
+    longest = max(stretches, key=lambda s: s[1] - s[0], default=None)
+    cpu = sum(s for _, s, _ in samples)
+    print(f"== idle monitor: wall {wall:.0f} s, CPU of the tree {cpu:.0f} s "
+          f"({cpu / max(wall, 1e-9):.2f} CPUs on average)")
+    if longest:
+        a, b = longest
+        print(f"== longest idle stretch: {b - a} s from t = {samples[a][0]:.0f} s; "
+              f"alive then: {samples[a][2][:8]}")
+    print(f"== idle stretches over 60 s: {sum(1 for a, b in stretches if b - a > 60)}")
+    if args.log:
+        with open(args.log, "w") as f:
+            for t, share, _ in samples:
+                f.write(f"{t:.0f} {share:.2f}\n")
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())
