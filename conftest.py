@@ -13,6 +13,8 @@ from __future__ import annotations
 import base64
 import io
 
+import pytest
+
 FIGURE_PIXEL_TOLERANCE = 5e-4        # fraction of the pixels
 FIGURE_LEVEL_TOLERANCE = 0.1         # of the 0..1 channel range
 
@@ -74,3 +76,55 @@ def pytest_configure(config):
 
     IPyNbCell.compare_outputs = compare_outputs
     IPyNbCell._annslam_figures = True
+
+
+# ------------------------------------------------------------------ scheduling on workers
+# `./course.sh test` runs on two pytest-xdist workers. A test module (and a notebook's cells)
+# runs on one worker, so that its module fixtures are built once and a notebook's cells run
+# in order in one kernel, as `--dist loadfile` does; except the modules in SPLIT, whose tests
+# are independent Run Alls of one chapter each, which go to whichever worker is free. Work is
+# handed out longest first (HEAVY_FIRST, then the rest in collection order; inside a SPLIT
+# module the later, longer chapters first), so that no worker is left with a long test at
+# the end while the other idles (`--no-loadscope-reorder` keeps this order). xdist's own
+# `--dist loadgroup` cannot do this with pytest 9.2: it renames node ids, which pytest 9.2
+# no longer lets it do, and silently falls back to sending single tests.
+SPLIT = ("tests/test_student_run.py", "tests/test_browser_widgets_0508.py",
+         "tests/test_browser_widgets_0104.py")
+HEAVY_FIRST = ("tests/test_student_run.py", "tests/test_browser_widgets_0508.py",
+               "tests/test_install.py", "tests/test_grader_nbgrader.py",
+               "tests/test_browser_widgets_0104.py", "tests/test_grader_attacks.py",
+               "notebooks/08", "notebooks/05", "notebooks/07", "notebooks/06",
+               "tests/test_consistency.py", "tests/test_browser.py",
+               "tests/test_figure_regression.py", "tests/test_workspace.py")
+
+
+def _path(nodeid: str) -> str:
+    return nodeid.split("::")[0]
+
+
+def _rank(path: str) -> int:
+    return next((k for k, p in enumerate(HEAVY_FIRST) if path.startswith(p)), len(HEAVY_FIRST))
+
+
+def pytest_collection_modifyitems(config, items):
+    order = {id(item): k for k, item in enumerate(items)}
+
+    def key(item):
+        path = _path(item.nodeid)
+        return (_rank(path), -order[id(item)] if path in SPLIT else order[id(item)])
+
+    items.sort(key=key)
+
+
+@pytest.hookimpl(optionalhook=True)          # xdist's hook: absent under -p no:xdist
+def pytest_xdist_make_scheduler(config, log):
+    from xdist.scheduler import LoadScopeScheduling
+
+    class CourseScheduling(LoadScopeScheduling):
+        """One work unit per module (per notebook), one per test in SPLIT's modules."""
+
+        def _split_scope(self, nodeid: str) -> str:
+            path = _path(nodeid)
+            return nodeid if path in SPLIT else path
+
+    return CourseScheduling(config, log)

@@ -3,9 +3,9 @@ near-zero CPU while nothing finishes.
 
     python benchmarks/idle_monitor.py [--threshold 0.05] [--log FILE] -- COMMAND ...
 
-Samples the CPU seconds of the command and all its descendants once a second. An idle
-stretch is a run of seconds in which the whole tree used less than ``--threshold`` of one
-CPU. Prints the command's output as it comes, then: wall seconds, CPU seconds of the tree,
+Samples the machine's busy CPU seconds once a second (run it alone: nothing else may use the
+CPUs). An idle stretch is a run of seconds in which less than ``--threshold`` of one CPU was
+busy. Prints the command's output as it comes, then: wall seconds, CPU seconds of the tree,
 the longest idle stretch (start, length, the processes alive then), and the count of idle
 stretches over 60 s. Exits with the command's exit code. Not a test: a measurement.
 """
@@ -33,28 +33,23 @@ def main(argv=None) -> int:
     samples: list[tuple[float, float, list[str]]] = []      # (t, share of one CPU, alive)
     done = threading.Event()
 
+    def busy() -> float:
+        t = psutil.cpu_times()
+        return sum(t) - t.idle - getattr(t, "iowait", 0.0)
+
     def sample():
-        # Linux adds a reaped child's CPU (and its reaped children's) to its parent's
-        # children_* times: the alive processes' own and children's times count everything
-        # but orphans.
-        last_total, last_t = 0.0, time.monotonic()
+        # The whole machine's busy CPU seconds (/proc/stat): the command must run alone.
+        # (Summing the tree's processes loses the CPU of orphans, which then looks idle.)
+        last_busy, last_t = busy(), time.monotonic()
         while not done.wait(1.0):
-            now = time.monotonic()
+            now, b = time.monotonic(), busy()
             try:
-                procs = [root, *root.children(recursive=True)]
+                alive = [" ".join(p.cmdline()[:4])[:120]
+                         for p in [root, *root.children(recursive=True)]]
             except psutil.Error:
-                break
-            total, alive = 0.0, []
-            for p in procs:
-                try:
-                    ct = p.cpu_times()
-                    total += ct.user + ct.system + ct.children_user + ct.children_system
-                    alive.append(" ".join(p.cmdline()[:4])[:120])
-                except psutil.Error:
-                    pass
-            share = max(0.0, total - last_total) / max(now - last_t, 1e-9)
-            samples.append((now - t0, share, alive))
-            last_total, last_t = max(total, last_total), now
+                alive = []
+            samples.append((now - t0, max(0.0, b - last_busy) / max(now - last_t, 1e-9), alive))
+            last_busy, last_t = b, now
 
     th = threading.Thread(target=sample, daemon=True)
     th.start()
@@ -73,7 +68,7 @@ def main(argv=None) -> int:
         stretches.append((start, len(samples)))
     longest = max(stretches, key=lambda s: s[1] - s[0], default=None)
     cpu = sum(s for _, s, _ in samples)
-    print(f"== idle monitor: wall {wall:.0f} s, CPU of the tree {cpu:.0f} s "
+    print(f"== idle monitor: wall {wall:.0f} s, busy CPU {cpu:.0f} s "
           f"({cpu / max(wall, 1e-9):.2f} CPUs on average)")
     if longest:
         a, b = longest

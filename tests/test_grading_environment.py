@@ -120,6 +120,8 @@ def test_bubblewrap_mounts_bind_the_interpreter_back_and_keep_hidden_folders_hid
     assert order[("--tmpfs", "/tmp")] < order[("--ro-bind", str(Path(sys.prefix).resolve()))]
     assert order[("--tmpfs", str(tmp_path / "hidden"))] < order[("--ro-bind", str(data))]
     assert order[("--ro-bind", str(Path(sys.prefix).resolve()))] < order[("--tmpfs", str(inner))]
+    site = next(p for p in sys.path if p.endswith("site-packages"))
+    assert ("--ro-bind", site) in order                    # what a .pth line may point to
     for p in sandbox.interpreter_paths():
         assert ("--ro-bind", str(p)) in order, p
     assert pairs[-1] == ("--bind", str(sb.root))

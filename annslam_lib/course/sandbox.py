@@ -147,11 +147,14 @@ def _bwrap_probe() -> tuple[str | None, str]:
 
 
 def interpreter_paths() -> list[Path]:
-    """Every folder the kernel's interpreter needs: the environment's prefixes and the
-    folders of each link from ``sys.executable`` to the real binary (a venv's python is a
-    link to its base interpreter, which may lie in a temporary folder too)."""
+    """Every folder the kernel's interpreter needs: the environment's prefixes, the folders
+    of each link from ``sys.executable`` to the real binary (a venv's python is a link to
+    its base interpreter, which may lie in a temporary folder too), and the folders on
+    ``sys.path`` (a ``.pth`` line may add one outside the environment). Bound read-only,
+    they are what the kernel would see anyway were they not under ``/tmp``."""
     found = [Path(p) for p in {sys.prefix, sys.base_prefix, sys.exec_prefix,
                                 sys.base_exec_prefix}]
+    found += [Path(p) for p in sys.path if p and Path(p).is_dir()]
     exe = Path(sys.executable)
     for _ in range(40):                           # follow the chain of links, hop by hop
         found.append(exe.parent)
@@ -246,19 +249,20 @@ class Sandbox:
     # ------------------------------------------------------------------ kernel life
     def _prefix(self) -> list[str]:
         """bubblewrap's arguments: everything read-only, /tmp, /dev/shm and the hidden
-        folders empty, then the interpreter and the data bound back read-only wherever
-        they lie (under /tmp too), and the scratch folder writable. Mounts are applied
-        shallow before deep, so a folder inside a hidden one stays visible if the kernel
-        needs it, and a hidden folder inside a needed one stays hidden."""
+        folders empty, the interpreter and the data bound back read-only wherever they lie
+        (under /tmp too), and the scratch folder writable. Mounts are applied shallow
+        before deep, so a folder inside a hidden one stays visible if the kernel needs it,
+        and a hidden folder inside (or equal to) a needed one stays hidden."""
         if self.isolation != "bwrap":
             return []
         from ..data import fetch
-        mounts = [("--tmpfs", Path("/tmp")), ("--tmpfs", Path("/dev/shm"))]
-        mounts += [("--tmpfs", h) for h in self.hide if h.exists()]
         data = fetch.data_dir()
+        mounts = [("--tmpfs", Path("/tmp")), ("--tmpfs", Path("/dev/shm"))]
         mounts += [("--ro-bind", p) for p in [*interpreter_paths(), data.absolute(),
                                               data.resolve()] if p.exists()]
-        mounts.sort(key=lambda m: len(m[1].parts))          # stable: shallow first
+        mounts += [("--tmpfs", h) for h in self.hide if h.exists()]
+        # shallow first (stable): at equal depth a hidden folder comes last and stays hidden
+        mounts.sort(key=lambda m: len(m[1].parts))
         args = [bwrap_available(), "--ro-bind", "/", "/", "--dev", "/dev", "--proc", "/proc"]
         for kind, p in mounts:
             args += [kind, str(p)] if kind == "--tmpfs" else [kind, str(p), str(p)]
