@@ -82,15 +82,16 @@ def pytest_configure(config):
 # `./course.sh test` runs on two pytest-xdist workers. A test module (and a notebook's cells)
 # runs on one worker, so that its module fixtures are built once and a notebook's cells run
 # in order in one kernel, as `--dist loadfile` does; except the modules in SPLIT, whose tests
-# are independent Run Alls of one chapter each, which go to whichever worker is free. Work is
+# are independent Run Alls of one chapter each (in JupyterLab; with nbclient where there is
+# no browser), which go to whichever worker is free. Work is
 # handed out longest first (HEAVY_FIRST, then the rest in collection order; inside a SPLIT
 # module the later, longer chapters first), so that no worker is left with a long test at
 # the end while the other idles (`--no-loadscope-reorder` keeps this order). xdist's own
 # `--dist loadgroup` cannot do this with pytest 9.2: it renames node ids, which pytest 9.2
 # no longer lets it do, and silently falls back to sending single tests.
-SPLIT = ("tests/test_student_run.py", "tests/test_browser_widgets_0508.py",
-         "tests/test_browser_widgets_0104.py")
-HEAVY_FIRST = ("tests/test_student_run.py", "tests/test_browser_widgets_0508.py",
+SPLIT = ("tests/test_browser_widgets_0508.py", "tests/test_browser_widgets_0104.py",
+         "tests/test_student_run.py")
+HEAVY_FIRST = ("tests/test_browser_widgets_0508.py",
                "tests/test_install.py", "tests/test_grader_nbgrader.py",
                "tests/test_browser_widgets_0104.py", "tests/test_grader_attacks.py",
                "notebooks/08", "notebooks/05", "notebooks/07", "notebooks/06",

@@ -174,3 +174,35 @@ RUN_STATE_JS = """() => {
   if (done > 0 && !p.some(t => t === '[*]:')) return 'stopped';
   return false;
 }"""
+
+# How far a Run All got: [cells with an execution number, code cells, cells queued or
+# running ([*]), the kernel idle]. A cell that raises with the `raises-exception` tag (the
+# student versions' autograded checks) does not stop the kernel's queue, but JupyterLab
+# 4.6 clears the [*] of the cells still queued: the run goes on without them showing it.
+RUN_PROGRESS_JS = """() => {
+  const p = [...document.querySelectorAll('.jp-Notebook .jp-CodeCell .jp-InputPrompt')]
+    .map(e => e.textContent.trim());
+  const idle = [...document.querySelectorAll('.jp-StatusBar-Item')]
+    .some(e => e.textContent.includes('| Idle'));
+  return [p.filter(t => /^\\[\\d+\\]:$/.test(t)).length, p.length,
+          p.filter(t => t === '[*]:').length, idle];
+}"""
+
+
+def wait_run_all(page, timeout: float, settle: float = 5.0) -> tuple[str, float]:
+    """('done', s) once every code cell has its execution number, or ('stopped', s) once the
+    count has not moved for ``settle`` seconds with the kernel idle and nothing shown
+    queued; ('timeout', s) after ``timeout`` seconds."""
+    t0 = time.monotonic()
+    last, since = None, t0
+    while time.monotonic() - t0 < timeout:
+        done, total, queued, idle = page.evaluate(RUN_PROGRESS_JS)
+        now = time.monotonic()
+        if total and done == total:
+            return "done", now - t0
+        if done != last or queued or not idle:
+            last, since = done, now
+        elif done and now - since >= settle:
+            return "stopped", now - t0
+        time.sleep(0.2)
+    return "timeout", time.monotonic() - t0

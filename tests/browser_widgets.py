@@ -3,9 +3,10 @@
 tests/test_browser_widgets_0104.py and tests/test_browser_widgets_0508.py (two files, so that
 the two test workers share them); this module holds what they run.
 
-Each file's JupyterLab serves stripped copies of its notebooks. For each notebook: Run All
-Cells (it must reach the last cell), then for each of its widgets: press ArrowRight on its
-first slider, as a student would, and check that
+Each file's JupyterLab serves the student versions of its notebooks (the course's release, no
+outputs), as a student opens them. For each notebook: Run All Cells (it must reach the last
+cell), then for each of its widgets: press ArrowRight on its first slider, as a student
+would, and check that
 
 - the readout text and the figure both change, within STEP_TIMEOUT, and how long it took
   (printed; the course's target is 0.5 s, a measurement here, not an assertion: software
@@ -16,7 +17,10 @@ first slider, as a student would, and check that
 - otherwise (06-08, whose inputs are whole filter runs or trained network grids) the text
   changed and still has the widget's shape (same number of lines);
 
-and keep a screenshot of each moved widget in test-artifacts/browser/. Skipped, saying why,
+and keep a screenshot of each moved widget in test-artifacts/browser/. Then save the notebook
+from JupyterLab and check what the Run All left: only the exercises raised, each saying
+"not written yet" in a few lines (tests/student_run_checks.py; tests/test_student_run.py
+checks the same with nbclient where there is no browser). Skipped, saying why,
 without Playwright or Chromium (as tests/test_browser.py).
 """
 import contextlib
@@ -26,8 +30,9 @@ import time
 
 import matplotlib
 import pytest
-from browser_support import (ARTIFACTS, CHROMIUM_ARGS, REPO, RUN_STATE_JS, chromium_path,
-                             serve_copy, start_lab, why_no_browser)
+from browser_support import (ARTIFACTS, CHROMIUM_ARGS, REPO, chromium_path, start_lab,
+                             wait_run_all, why_no_browser)
+from student_run_checks import check_student_run
 
 from annslam_lib.models.vehicle import ACFR_UTE
 
@@ -95,10 +100,13 @@ def chromium():
 
 @pytest.fixture(scope="module")
 def lab(chromium, car_park, victoria_park, tmp_path_factory, request):
+    from annslam_lib.course import release
+
     work = tmp_path_factory.mktemp("lab-widgets")
-    for stem in request.module.NOTEBOOKS:
-        serve_copy(REPO / "notebooks" / f"{stem}.ipynb", work / "notebooks")
+    release.release([REPO / "notebooks" / f"{stem}.ipynb" for stem in request.module.NOTEBOOKS],
+                    work / "notebooks")                 # what students open: no outputs
     server = start_lab(work / "notebooks", work)
+    server.folder = work / "notebooks"
     yield server
     server.stop()
 
@@ -157,7 +165,8 @@ def check_widgets(stem, lab, browser, car_park):
     (module docstring)."""
     import nbformat
 
-    nb = nbformat.read(REPO / "notebooks" / f"{stem}.ipynb", as_version=4)
+    path = lab.folder / f"{stem}.ipynb"
+    nb = nbformat.read(path, as_version=4)
     mine = [w for w in WIDGETS if w[0] == stem]
     cells = {}
     for _, call, _ in mine:
@@ -174,8 +183,14 @@ def check_widgets(stem, lab, browser, car_park):
               "the notebook to open with an idle kernel", shot)
         page.locator(".lm-MenuBar-item", has_text="Run").click()
         page.get_by_role("menuitem", name="Run All Cells", exact=True).click()
-        state = _wait(page, lab, RUN_STATE_JS, None, RUN_ALL_TIMEOUT, "Run All Cells", shot)
+        state, _ = wait_run_all(page, RUN_ALL_TIMEOUT)
         t_run = time.monotonic() - t0
+        if state == "timeout":
+            ARTIFACTS.mkdir(parents=True, exist_ok=True)
+            page.screenshot(path=str(shot))
+            pytest.fail(f"{stem}: Run All did not finish within {RUN_ALL_TIMEOUT} s; "
+                        f"screenshot {shot}; JupyterLab log tail:\n{lab.log_tail(1500)}",
+                        pytrace=False)
         if state != "done":
             errors = page.locator('[data-mime-type="application/vnd.jupyter.stderr"]').all_inner_texts()
             pytest.fail(f"{stem}: Run All stopped before the last cell; stderr:\n"
@@ -204,8 +219,32 @@ def check_widgets(stem, lab, browser, car_park):
                 path=str(ARTIFACTS / f"{stem}-cell{i}.png"))
             print(f"{stem} cell {i}: Run All {t_run:.1f} s; ArrowRight answered in {took:.2f} s "
                   f"(polled every 50 ms); readouts {before['readouts']} -> {after['readouts']}")
+        check_student_run(_saved(page, lab, path, shot))
     finally:
         page.close()
+
+
+def _saved(page, lab, path, shot):
+    """File -> Save Notebook, then the notebook as JupyterLab wrote it, with every code cell
+    executed (what the student's Run All left)."""
+    import nbformat
+
+    page.locator(".lm-MenuBar-item", has_text="File").click()
+    page.get_by_role("menuitem", name=re.compile(r"^Save Notebook(?! As)")).click()
+    end = time.monotonic() + PAGE_TIMEOUT
+    while time.monotonic() < end:
+        try:
+            nb = nbformat.read(path, as_version=4)
+        except Exception:              # being written
+            nb = None
+        if nb is not None and all(c.get("execution_count") is not None for c in nb.cells
+                                  if c.cell_type == "code"):
+            return nb
+        time.sleep(0.2)
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    page.screenshot(path=str(shot))
+    pytest.fail(f"JupyterLab did not save {path.name} with every cell executed within "
+                f"{PAGE_TIMEOUT} s; screenshot {shot}", pytrace=False)
 
 
 def _moved_text(factory, car):
