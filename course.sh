@@ -8,6 +8,8 @@
 #   ./course.sh refresh [NB...]     re-execute notebooks in place (instructors)
 #   ./course.sh release [...]       write the student versions (no solutions, no hidden tests)
 #   ./course.sh grade SUB...        grade submitted notebooks (instructors)
+#   ./course.sh hub --class FILE [--port P]   a JupyterHub for a class, as root (README)
+#   ./course.sh class ACTION CHAPTER          release|collect|grade|feedback on that hub
 #
 # `test` also installs environment-instructor.txt (nbgrader, playwright, ...).
 #
@@ -65,7 +67,14 @@ case "$cmd" in
     setup) setup ;;
     lab) lab "$@" ;;
     test)
-        setup environment-instructor.txt
+        setup environment-instructor.txt environment-hub.txt
+        if [ "$(id -u)" = 0 ]; then
+            # the class hub's folder for tests/test_hub.py (students' environment, release,
+            # data, proxy), outside the checkout: students' accounts must reach it
+            ANNSLAM_HUB_DIR=${ANNSLAM_HUB_TEST_DIR:-/tmp/annslam-hub-test} \
+                "$VPY" -m annslam_lib hub --prepare-only ||
+                echo "== the class hub could not be prepared (above): tests/test_hub.py says why"
+        fi
         t0=$SECONDS
         "$VENV/bin/ruff" check .
         "$VPY" -m pytest "$@"
@@ -83,8 +92,16 @@ case "$cmd" in
         setup
         "$VPY" -m annslam_lib grade "$@"
         ;;
+    hub)
+        setup environment-hub.txt
+        exec "$VPY" -m annslam_lib hub "$@"
+        ;;
+    class)
+        setup environment-hub.txt
+        exec "$VPY" -m annslam_lib class "$@"
+        ;;
     *)
-        echo "usage: ./course.sh [lab [--instructor]|test|setup|refresh|release|grade]" >&2
+        echo "usage: ./course.sh [lab [--instructor]|test|setup|refresh|release|grade|hub|class]" >&2
         exit 2
         ;;
 esac

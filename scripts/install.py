@@ -1,6 +1,10 @@
 """Set up the course's virtual environment: the stages of ``./course.sh setup``.
 
-    python3 scripts/install.py [--venv DIR] [REQUIREMENTS.txt ...]
+    python3 scripts/install.py [--venv DIR] [--base FILE] [--wheel] [REQUIREMENTS.txt ...]
+
+``--base`` replaces ``environment.txt`` (``environment-student.txt`` for a class hub's
+student environment); ``--wheel`` then installs the library itself as a wheel built from
+this checkout (not editable: the students' environment holds no checkout).
 
 Standard library only: it runs on the interpreter that creates the venv. Stages, each
 announced by one line and skipped when its stamp says nothing changed:
@@ -202,6 +206,33 @@ def install_requirements(vpy: Path, venv: Path, reqs: list[Path], stage: str) ->
     return pending
 
 
+def _library_digest() -> str:
+    h = hashlib.sha256()
+    for p in sorted((ROOT / "annslam_lib").rglob("*.py")) + [ROOT / "pyproject.toml"]:
+        h.update(str(p.relative_to(ROOT)).encode() + b"\0" + p.read_bytes())
+    return h.hexdigest()
+
+
+def install_wheel(vpy: Path, venv: Path, stage: str) -> list:
+    """The library as a wheel built from this checkout, when its sources changed."""
+    stamp, want = venv / f"{STAMP_PREFIX}library-wheel", _library_digest()
+    if stamp.exists() and stamp.read_text().strip() == want:
+        say(f"{stage} the library's wheel: up to date in {venv}")
+        return []
+    stamp.unlink(missing_ok=True)
+    say(f"{stage} building the library's wheel and installing it into {venv}")
+    wheels = venv / "annslam-wheel"
+    shutil.rmtree(wheels, ignore_errors=True)
+    built = subprocess.run([str(vpy), "-m", "pip", "wheel", "--disable-pip-version-check",
+                            "--quiet", "--no-deps", "--wheel-dir", str(wheels), str(ROOT)])
+    found = sorted(wheels.glob("annslam-*.whl"))
+    if built.returncode != 0 or not found:
+        raise SetupError("pip could not build the library's wheel (its message is above)")
+    if _pip(vpy, "--no-deps", "--force-reinstall", "--quiet", str(found[0])).returncode != 0:
+        raise SetupError(f"pip could not install {found[0].name} into {venv}")
+    return [(stamp, want)]
+
+
 def check_environment(vpy: Path, venv: Path) -> None:
     say("[4/4] checking the environment (CPU torch, no CUDA packages)")
     env = dict(os.environ, ANNSLAM_VENV=str(venv))
@@ -212,15 +243,21 @@ def check_environment(vpy: Path, venv: Path) -> None:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--venv", default=os.environ.get("ANNSLAM_VENV", ".venv"))
+    ap.add_argument("--base", default="environment.txt",
+                    help="the base requirements file (default environment.txt)")
+    ap.add_argument("--wheel", action="store_true",
+                    help="install the library as a wheel built from this checkout")
     ap.add_argument("requirements", nargs="*", default=[])
     args = ap.parse_args(argv)
     venv = Path(args.venv)
-    reqs = [ROOT / "environment.txt"] + [ROOT / r for r in args.requirements]
+    reqs = [ROOT / args.base] + [ROOT / r for r in args.requirements]
     try:
         check_python()
         vpy = ensure_venv(venv)
         ensure_torch(vpy, venv)
         pending = install_requirements(vpy, venv, reqs, "[3/4]")
+        if args.wheel:
+            pending += install_wheel(vpy, venv, "[3/4]")
         check_environment(vpy, venv)
     except SetupError as e:
         print(f"\nSET-UP FAILED: {e}", file=sys.stderr)

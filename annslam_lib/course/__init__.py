@@ -8,8 +8,13 @@
 - ``codec``: data, never code, between the grader and that kernel
 - ``kernel_side``: the grader's small helper inside the kernel
 - ``kernels``: Run All on a fresh kernel with a client that cannot stall silently
+- ``hub``: a class on JupyterHub: the class list, one Unix account per student, the hub folder
+- ``hub_config``: JupyterHub's settings for that class (``hub/jupyterhub_config.py``)
+- ``hub_setup``: the hub folder prepared (students' environment, release, data, proxy), the start
+- ``hub_class``: the instructor's steps through nbgrader's exchange (release, collect, grade,
+  feedback)
 - ``cli``: ``python -m annslam_lib ...``
 """
 
 __all__ = ["release", "workspace", "grader", "plan", "sandbox", "codec", "kernel_side",
-           "kernels", "cli"]
+           "kernels", "hub", "hub_config", "hub_setup", "hub_class", "cli"]

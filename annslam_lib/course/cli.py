@@ -11,6 +11,8 @@
     python -m annslam_lib exercises                                the graded exercises per notebook
     python -m annslam_lib workspace                                write/refresh your student copy
     python -m annslam_lib running --root DIR                       is a course server open on DIR?
+    python -m annslam_lib hub --class FILE [--port P]              a JupyterHub for a class (root)
+    python -m annslam_lib class release|collect|grade|feedback CH  the instructor's steps on it
 
 Each command is a sub-parser added by an ``_add_<command>`` function that sets ``func``;
 ``main`` returns the exit code.
@@ -277,6 +279,90 @@ def _add_running(sub) -> None:
     p.set_defaults(func=_running)
 
 
+def _hub(args: argparse.Namespace) -> int:
+    from .hub import HubError, HubLayout, check_name
+    from .hub_setup import prepare, start
+
+    try:
+        check_name(args.instructor)
+        if args.prepare_only:
+            prepare(HubLayout.from_env(), args.class_file, args.instructor)
+            return 0
+        if args.class_file is None:
+            raise HubError("name the class: --class FILE (the students' user names, one a line)")
+        start(HubLayout.from_env(), args.class_file, port=args.port, instructor=args.instructor)
+    except HubError as e:
+        print(f"hub: {e}", file=sys.stderr)
+        return 2
+    return 0                                   # not reached: start() becomes JupyterHub
+
+
+def _add_hub(sub) -> None:
+    p = sub.add_parser("hub", help="a JupyterHub for a class on 127.0.0.1 (as root; the hub "
+                       "folder is $ANNSLAM_HUB_DIR, default /srv/annslam-hub)")
+    p.add_argument("--class", dest="class_file", metavar="FILE",
+                   help="the students' user names, one a line")
+    p.add_argument("--port", type=int, default=8000)
+    p.add_argument("--instructor", default="instructor", metavar="NAME",
+                   help="the instructor's account (default instructor)")
+    p.add_argument("--prepare-only", action="store_true",
+                   help="set up the hub folder (students' environment, release, data, proxy) "
+                   "and stop")
+    p.set_defaults(func=_hub)
+
+
+def _class(args: argparse.Namespace) -> int:
+    from .grader import GradingEnvironmentError
+    from .hub import HubError, HubLayout
+    from .hub_class import ACTIONS
+
+    try:
+        ACTIONS[args.action](HubLayout.from_env(), args.chapter)
+    except GradingEnvironmentError as e:
+        print(f"class grade: the grading environment is broken, so no submission was scored "
+              f"from here on: {e}", file=sys.stderr)
+        return 3
+    except HubError as e:
+        print(f"class {args.action}: {e}", file=sys.stderr)
+        return 2
+    return 0
+
+
+def _add_class(sub) -> None:
+    p = sub.add_parser("class", help="the instructor's steps on the class hub (as root): "
+                       "release, collect, grade, feedback of one chapter")
+    p.add_argument("action", choices=["release", "collect", "grade", "feedback"])
+    p.add_argument("chapter", help="a notebook's name without .ipynb, e.g. 03_observation")
+    p.set_defaults(func=_class)
+
+
+def _singleuser(args: argparse.Namespace) -> int:
+    import os
+    from pathlib import Path
+
+    from .workspace import sync
+
+    rest = args.rest[1:] if args.rest[:1] == ["--"] else args.rest
+    try:
+        report = sync(Path.home() / "course", sorted(Path(args.release).glob("*.ipynb")),
+                      released=True)
+    except (OSError, ValueError) as e:
+        print(f"singleuser: your course folder could not be written: {e}", file=sys.stderr)
+        return 2
+    print(f"== {report.summary()}", file=sys.stderr, flush=True)
+    exe = Path(sys.executable).parent / "jupyterhub-singleuser"
+    os.execv(exe, [str(exe), *rest])
+    return 0                                   # not reached
+
+
+def _add_singleuser(sub) -> None:
+    p = sub.add_parser("singleuser", help="(run by the class hub as the student) copy the "
+                       "student versions into ~/course, then start jupyterhub-singleuser")
+    p.add_argument("--release", required=True, metavar="DIR")
+    p.add_argument("rest", nargs=argparse.REMAINDER)
+    p.set_defaults(func=_singleuser)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m annslam_lib",
                                      description="annslam course library: data and tools.")
@@ -289,6 +375,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_exercises(sub)
     _add_workspace(sub)
     _add_running(sub)
+    _add_hub(sub)
+    _add_class(sub)
+    _add_singleuser(sub)
     return parser
 
 

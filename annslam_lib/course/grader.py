@@ -545,14 +545,15 @@ def check_environment(*, limits: Limits = Limits(), isolation: str = "auto",
 
 
 def grade_batch(paths, *, instructor_dir=None, json_path=None, limits: Limits = Limits(),
-                isolation: str = "auto", log=print) -> list[SubmissionGrade]:
+                isolation: str = "auto", log=print, hide=()) -> list[SubmissionGrade]:
     """Grade every submission in ``paths`` (files, or folders searched for notebooks) against
     the instructor notebook of the same file name in ``instructor_dir`` (default the
     course's ``notebooks/``). A submission that cannot be graded gets its reason and the
-    others go on; ``json_path`` is rewritten after every submission."""
+    others go on; ``json_path`` is rewritten after every submission. ``hide``: more folders
+    the student's code must not see (besides the instructor's and the submissions' own)."""
     inst_dir = Path(instructor_dir or ROOT / "notebooks").resolve()
     subs = _submissions(paths)
-    hide = {inst_dir} | {p.resolve().parent for p in subs}
+    hide = {inst_dir} | {p.resolve().parent for p in subs} | {Path(h).resolve() for h in hide}
     guard = [ROOT / "annslam_lib", inst_dir]
     from ..data import fetch
     if fetch.data_dir().exists():

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import nbformat
 
-from .release import student_version, validate
+from .release import hidden_test_lines, solution_lines, student_version, validate
 
 __all__ = ["ENV_WORK", "MANIFEST", "SyncReport", "work_dir", "sync", "running_servers"]
 
@@ -62,9 +62,13 @@ def _digest(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
-def sync(folder=None, notebooks=None) -> SyncReport:
+def sync(folder=None, notebooks=None, *, released: bool = False) -> SyncReport:
     """Write the student versions of ``notebooks`` (default: the course's) into ``folder``
-    (default :func:`work_dir`) by the rules of the module docstring."""
+    (default :func:`work_dir`) by the rules of the module docstring.
+
+    ``released``: ``notebooks`` are student versions already (a release folder, as on a
+    class hub, where each student's server copies them into its own folder as that
+    student); they are checked to be student versions and copied as they are."""
     folder = Path(folder) if folder is not None else work_dir()
     sources = sorted(Path(p) for p in (notebooks or (ROOT / "notebooks").glob("*.ipynb")))
     if any(p.resolve().parent == folder.resolve() for p in sources):
@@ -78,8 +82,15 @@ def sync(folder=None, notebooks=None) -> SyncReport:
     report = SyncReport(folder)
     for src in sources:
         nb = nbformat.read(src, as_version=4)
-        validate(nb, src.name)
-        text = nbformat.writes(student_version(nb, src.name)) + "\n"
+        if released:
+            validate(nb, src.name, instructor=False)
+            if solution_lines(nb) or hidden_test_lines(nb):
+                raise ValueError(f"{src} holds solutions or hidden tests: it is not a "
+                                 "student version")
+            text = nbformat.writes(nb) + "\n"
+        else:
+            validate(nb, src.name)
+            text = nbformat.writes(student_version(nb, src.name)) + "\n"
         new = _digest(text.encode())
         dest = folder / src.name
         if not dest.exists():

@@ -1,0 +1,114 @@
+"""JupyterHub's configuration for a class: what ``hub/jupyterhub_config.py`` applies.
+
+``python -m annslam_lib hub`` prepares the hub folder (:mod:`.hub`) and starts JupyterHub
+with the settings below passed in the environment (``ANNSLAM_HUB_*``), so the config file
+holds no secret and a hub restarted by hand reads the same settings.
+
+Swapping the parts a university changes:
+
+- **Authenticator.** The built-in ``shared-password`` authenticator suits a supervised lab:
+  one password for the students (``ANNSLAM_HUB_PASSWORD``, at least 8 characters), one for
+  the instructor (``ANNSLAM_HUB_INSTRUCTOR_PASSWORD``, at least 32). It does not tell
+  students apart: anyone with the students' password can log in as any listed student. For
+  graded work use the university's login: set ``c.JupyterHub.authenticator_class`` to
+  ``oauthenticator.GenericOAuthenticator`` (OAuth/OpenID Connect) or ``ltiauthenticator``'s
+  LTI 1.3 authenticator (from an LMS), keeping ``c.Authenticator.allowed_users`` from the
+  class file.
+- **Spawner.** ``LocalProcessSpawner`` (the default) with one Unix account per student is
+  the isolation on one machine. For Docker, ``dockerspawner.DockerSpawner`` with the image of
+  ``hub/Dockerfile``; for a cluster, Zero to JupyterHub (``KubeSpawner``), configured by its
+  ``config.yaml`` instead of this file. ``SimpleLocalProcessSpawner`` is refused: it runs
+  every student's server as the hub's own user, so any student could read every home.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from .hub import HubError, HubLayout, ensure_account, read_class, server_env
+
+__all__ = ["configure", "check_spawner", "pre_spawn", "REFUSED_SPAWNERS", "SETTINGS"]
+
+#: The environment variables ``python -m annslam_lib hub`` sets for the config file.
+SETTINGS = {
+    "ANNSLAM_HUB_DIR": "the hub folder",
+    "ANNSLAM_HUB_CLASS": "the class file (student names, one a line)",
+    "ANNSLAM_HUB_INSTRUCTOR": "the instructor's account name (default instructor)",
+    "ANNSLAM_HUB_PORT": "the port of the hub's public address on 127.0.0.1 (default 8000); "
+                        "the hub's internal API uses the next one, the proxy's API the one after",
+    "ANNSLAM_HUB_PASSWORD": "the students' password (8 characters or more)",
+    "ANNSLAM_HUB_INSTRUCTOR_PASSWORD": "the instructor's password (32 characters or more)",
+    "ANNSLAM_HUB_ADMIN_TOKEN": "optional: an API token with admin rights on users and servers",
+}
+REFUSED_SPAWNERS = {"simple", "jupyterhub.spawner.SimpleLocalProcessSpawner"}
+
+
+def _role(spawner) -> str:
+    instructor = os.environ.get("ANNSLAM_HUB_INSTRUCTOR") or "instructor"
+    return "instructor" if spawner.user.name == instructor else "student"
+
+
+def pre_spawn(spawner) -> None:
+    """Before a server starts: the user's account (created on the first start), its folder
+    ``~/course`` as the server's root, and the role's environment."""
+    layout = HubLayout.from_env()
+    entry = ensure_account(spawner.user.name)
+    spawner.notebook_dir = str(Path(entry.pw_dir) / "course")
+    spawner.popen_kwargs = {**spawner.popen_kwargs, "cwd": entry.pw_dir}  # not the hub's
+    spawner.environment = {**spawner.environment, **server_env(layout, _role(spawner))}
+
+
+def configure(c, env=None) -> None:
+    """Apply the class hub's settings (module docstring) to JupyterHub's config ``c``."""
+    env = os.environ if env is None else env
+    layout = HubLayout(Path(env.get("ANNSLAM_HUB_DIR") or HubLayout.from_env().root))
+    instructor = env.get("ANNSLAM_HUB_INSTRUCTOR") or "instructor"
+    if not env.get("ANNSLAM_HUB_CLASS"):
+        raise HubError("ANNSLAM_HUB_CLASS is not set: start the hub with ./course.sh hub "
+                       "--class FILE")
+    students = read_class(env["ANNSLAM_HUB_CLASS"], instructor)
+    port = int(env.get("ANNSLAM_HUB_PORT") or 8000)
+
+    c.JupyterHub.ip = "127.0.0.1"
+    c.JupyterHub.port = port
+    c.JupyterHub.hub_ip = "127.0.0.1"
+    c.JupyterHub.hub_port = port + 1
+    c.ConfigurableHTTPProxy.api_url = f"http://127.0.0.1:{port + 2}"
+    c.ConfigurableHTTPProxy.command = [str(layout.proxy / "node_modules" / ".bin" /
+                                           "configurable-http-proxy")]
+    c.ConfigurableHTTPProxy.pid_file = str(layout.state / "proxy.pid")
+    c.JupyterHub.db_url = f"sqlite:///{layout.state / 'jupyterhub.sqlite'}"
+    c.JupyterHub.cookie_secret_file = str(layout.state / "jupyterhub_cookie_secret")
+
+    c.JupyterHub.authenticator_class = "shared-password"
+    c.SharedPasswordAuthenticator.user_password = env.get("ANNSLAM_HUB_PASSWORD", "")
+    c.SharedPasswordAuthenticator.admin_password = env.get("ANNSLAM_HUB_INSTRUCTOR_PASSWORD", "")
+    c.Authenticator.allowed_users = set(students)
+    c.Authenticator.admin_users = {instructor}
+
+    c.JupyterHub.spawner_class = "localprocess"
+    c.Spawner.cmd = [str(layout.env / "bin" / "python"), "-m", "annslam_lib", "singleuser",
+                     "--release", str(layout.release), "--"]
+    c.Spawner.default_url = "/lab"
+    c.Spawner.pre_spawn_hook = pre_spawn
+    # A class on one machine starts servers slowly (about 4 s of imports each, CPU-bound).
+    c.Spawner.start_timeout = 120
+    c.Spawner.http_timeout = 120
+
+    token = env.get("ANNSLAM_HUB_ADMIN_TOKEN")
+    if token:
+        c.JupyterHub.services = [{"name": "course-admin", "api_token": token}]
+        c.JupyterHub.load_roles = [{
+            "name": "course-admin", "services": ["course-admin"],
+            "scopes": ["admin:users", "admin:servers", "access:servers", "list:users",
+                       "read:users", "tokens"]}]
+
+
+def check_spawner(c) -> None:
+    """Refuse a spawner without per-student isolation (module docstring)."""
+    name = c.JupyterHub.spawner_class
+    name = name if isinstance(name, str) else f"{name.__module__}.{name.__qualname__}"
+    if name in REFUSED_SPAWNERS or name.endswith("SimpleLocalProcessSpawner"):
+        raise HubError("SimpleLocalProcessSpawner runs every student's server as the hub's "
+                       "user, so any student could read every other's files: use "
+                       "LocalProcessSpawner (the default), DockerSpawner or KubeSpawner")

@@ -1,0 +1,192 @@
+"""Prepare a class hub's folder and start JupyterHub: ``python -m annslam_lib hub``.
+
+Each stage is announced by one line and is cheap when nothing changed: the students'
+environment (``scripts/install.py --base environment-student.txt --wheel``, run by a Python
+every user can run), the student versions (released afresh), one verified copy of the data,
+nbgrader's exchange and course folders, each role's Jupyter configuration, and the proxy
+(``npm ci`` of ``hub/package.json``). Then JupyterHub starts with ``hub/jupyterhub_config.py``.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import secrets
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+from .hub import (HubError, HubLayout, open_to_all, reachable_by_others, read_class,
+                  running_hub, system_python, write_role_config)
+
+__all__ = ["ROOT", "PREPARED", "prepare", "start", "check_private", "copy_data", "install_proxy",
+           "passwords"]
+
+ROOT = Path(__file__).resolve().parents[2]
+PREPARED = ".annslam-hub-prepared"          # written when every stage of prepare() passed
+
+
+def say(text: str) -> None:
+    print(f"== {text}", flush=True)
+
+
+def _folders(layout: HubLayout) -> None:
+    for folder, mode in [(layout.root, 0o755), (layout.state, 0o700), (layout.release, 0o755),
+                         (layout.data, 0o755), (layout.course, 0o755), (layout.etc, 0o755),
+                         (layout.exchange, 0o1777)]:
+        folder.mkdir(parents=True, exist_ok=True)
+        os.chmod(folder, mode)
+
+
+def install_student_env(layout: HubLayout) -> None:
+    python = system_python()
+    say(f"students' environment in {layout.env} (Python {python}, library as a wheel)")
+    out = subprocess.run([str(python), str(ROOT / "scripts" / "install.py"), "--venv",
+                          str(layout.env), "--base", "environment-student.txt", "--wheel"])
+    if out.returncode != 0:
+        raise HubError(f"the students' environment could not be set up in {layout.env} "
+                       "(above)")
+    open_to_all(layout.env)
+
+
+def release_notebooks(layout: HubLayout) -> list[Path]:
+    from .release import release
+
+    for old in layout.release.glob("*.ipynb"):
+        old.unlink()
+    written = release(sorted((ROOT / "notebooks").glob("*.ipynb")), layout.release)
+    open_to_all(layout.release)
+    say(f"{len(written)} student versions in {layout.release}")
+    return written
+
+
+def copy_data(layout: HubLayout) -> None:
+    """One verified copy of the course's datasets in the hub folder, read-only for students:
+    copied from the data folder this process uses (``ANNSLAM_DATA``, else the user cache,
+    downloaded there first if missing), then verified where it lies."""
+    from ..data import fetch, registry
+
+    names = [e.name for e in registry.core()]
+    sources = {n: fetch.ensure(n, progress=False) for n in names}
+    before = os.environ.get(fetch.ENV_DIR)
+    os.environ[fetch.ENV_DIR] = str(layout.data)
+    try:
+        for n in names:
+            entry = registry.get(n)
+            dest = layout.data / entry.folder
+            dest.mkdir(parents=True, exist_ok=True)
+            for f in entry.files:
+                target = dest / f.name
+                if not target.exists() or target.stat().st_size != f.size:
+                    shutil.copyfile(sources[n] / f.name, target)
+            fetch.verify(n)
+    finally:
+        if before is None:
+            os.environ.pop(fetch.ENV_DIR, None)
+        else:
+            os.environ[fetch.ENV_DIR] = before
+    open_to_all(layout.data)
+    say(f"data: {len(names)} datasets verified in {layout.data}")
+
+
+def install_proxy(layout: HubLayout) -> Path:
+    """configurable-http-proxy at its pinned version, from the npm registry, in the hub
+    folder (``npm ci`` of ``hub/package.json`` and its lock file)."""
+    exe = layout.proxy / "node_modules" / ".bin" / "configurable-http-proxy"
+    lock = (ROOT / "hub" / "package-lock.json").read_bytes()
+    stamp = layout.proxy / ".annslam-lock-sha256"
+    want = hashlib.sha256(lock).hexdigest()
+    if exe.exists() and stamp.exists() and stamp.read_text() == want:
+        return exe
+    npm = shutil.which("npm")
+    if npm is None:
+        raise HubError("npm is not installed: the hub's proxy (configurable-http-proxy) comes "
+                       "from the npm registry. Install Node.js 20 or newer with npm")
+    layout.proxy.mkdir(parents=True, exist_ok=True)
+    for name in ("package.json", "package-lock.json"):
+        shutil.copyfile(ROOT / "hub" / name, layout.proxy / name)
+    say(f"proxy: npm ci in {layout.proxy}")
+    out = subprocess.run([npm, "ci", "--no-audit", "--no-fund", "--loglevel", "error"],
+                         cwd=layout.proxy)
+    if out.returncode != 0 or not exe.exists():
+        raise HubError(f"npm could not install configurable-http-proxy in {layout.proxy}")
+    stamp.write_text(want)
+    return exe
+
+
+def passwords(layout: HubLayout, env) -> dict[str, str]:
+    """The students' password (required) and the instructor's (generated once and kept in
+    ``state/instructor-password`` when not given)."""
+    student = env.get("ANNSLAM_HUB_PASSWORD", "")
+    if len(student) < 8:
+        raise HubError("set ANNSLAM_HUB_PASSWORD to the students' password (8 characters or "
+                       "more) before starting the hub")
+    instructor = env.get("ANNSLAM_HUB_INSTRUCTOR_PASSWORD", "")
+    kept = layout.state / "instructor-password"
+    if not instructor:
+        if not kept.exists():
+            kept.write_text(secrets.token_urlsafe(32) + "\n")
+            os.chmod(kept, 0o600)
+        instructor = kept.read_text().strip()
+        say(f"the instructor's password is in {kept}")
+    if len(instructor) < 32:
+        raise HubError("ANNSLAM_HUB_INSTRUCTOR_PASSWORD must have 32 characters or more")
+    if instructor == student:
+        raise HubError("the instructor's and the students' passwords must differ")
+    return {"ANNSLAM_HUB_PASSWORD": student, "ANNSLAM_HUB_INSTRUCTOR_PASSWORD": instructor}
+
+
+def check_private() -> None:
+    """Students' kernels must not reach the instructor's notebooks and tests."""
+    exposed = [str(p) for p in (ROOT / "notebooks", ROOT / "tests") if reachable_by_others(p)]
+    if exposed:
+        raise HubError("every student could read the instructor's notebooks (solutions, "
+                       f"hidden tests) in {', '.join(exposed)}: run chmod o-rwx "
+                       f"{' '.join(exposed)}, or keep the course's checkout in a folder only "
+                       "you can open (the hub needs only its own folder to be open)")
+
+
+def prepare(layout: HubLayout, class_file=None, instructor: str = "instructor") -> list[str]:
+    """Every stage of the module docstring but the start; returns the student names
+    (none without a class file: only the folder is prepared)."""
+    if os.geteuid() != 0:
+        raise HubError("the hub gives every student a Unix account of their own and runs "
+                       "their server as it: start it as root")
+    students = read_class(class_file, instructor) if class_file is not None else []
+    url = running_hub(layout)
+    if url:
+        raise HubError(f"a hub is already running from {layout.root} at {url} "
+                       f"(pid in {layout.state / 'hub.json'}); stop it first")
+    (layout.root / PREPARED).unlink(missing_ok=True)
+    _folders(layout)
+    if not reachable_by_others(layout.root):
+        raise HubError(f"students could not reach the hub folder {layout.root}: a folder "
+                       "above it is closed to other users. Set ANNSLAM_HUB_DIR to a folder "
+                       "they can reach (default /srv/annslam-hub)")
+    install_student_env(layout)
+    release_notebooks(layout)
+    copy_data(layout)
+    for role in ("student", "instructor"):
+        write_role_config(layout, role)
+    install_proxy(layout)
+    (layout.root / PREPARED).write_text("the class hub's folder is prepared\n")
+    return students
+
+
+def start(layout: HubLayout, class_file, *, port: int = 8000,
+          instructor: str = "instructor", env=None) -> None:
+    """Prepare, then replace this process by JupyterHub (``hub.json`` names it)."""
+    env = dict(os.environ if env is None else env)
+    check_private()
+    students = prepare(layout, class_file, instructor)
+    env.update(passwords(layout, env))
+    env.update({"ANNSLAM_HUB_DIR": str(layout.root), "ANNSLAM_HUB_CLASS":
+                str(Path(class_file).resolve()), "ANNSLAM_HUB_INSTRUCTOR": instructor,
+                "ANNSLAM_HUB_PORT": str(port)})
+    url = f"http://127.0.0.1:{port}"
+    (layout.state / "hub.json").write_text(json.dumps({"pid": os.getpid(), "url": url}) + "\n")
+    say(f"JupyterHub for {len(students)} students and {instructor!r} at {url}")
+    exe = Path(sys.executable).parent / "jupyterhub"
+    os.chdir(layout.state)
+    os.execve(exe, [str(exe), "-f", str(ROOT / "hub" / "jupyterhub_config.py")], env)

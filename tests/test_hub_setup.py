@@ -1,0 +1,343 @@
+"""The class hub's parts that need no running hub (issue 20): the class file, the students'
+Unix accounts, each role's Jupyter configuration, JupyterHub's settings, the passwords, the
+student environment's pins, and a student's folder filled from the release as that student.
+The hub itself, started for real, is tested in tests/test_hub.py."""
+from __future__ import annotations
+
+import grp
+import json
+import os
+import pwd
+import subprocess
+import sys
+from pathlib import Path
+
+import nbformat
+import pytest
+from traitlets.config import Config
+
+from annslam_lib.course import hub, hub_config, hub_setup, release, workspace
+
+ROOT = Path(__file__).resolve().parents[1]
+COURSE = sorted((ROOT / "notebooks").glob("*.ipynb"))
+root_only = pytest.mark.skipif(os.geteuid() != 0, reason="creates Unix accounts: needs root")
+
+
+def _reqs(name: str) -> dict[str, str]:
+    out = {}
+    for line in (ROOT / name).read_text().splitlines():
+        line = line.split("#", 1)[0].strip()
+        if line:
+            req, _, marker = line.partition(";")
+            pkg, _, version = req.strip().partition("==")
+            out[pkg.lower() + (f";{marker.strip()}" if marker else "")] = version
+    return out
+
+
+# -- the class file -------------------------------------------------------------------------
+
+def test_a_class_file_gives_its_names_without_comments_or_blank_lines(tmp_path):
+    f = tmp_path / "class.txt"
+    f.write_text("# lab group A\nalice\n\n  bob   # second row\ncarol_2\nd-e\n")
+    assert hub.read_class(f) == ["alice", "bob", "carol_2", "d-e"]
+
+
+@pytest.mark.parametrize("text, says", [
+    ("alice\nAlice\n", "line 2: 'Alice' is not a user name"),
+    ("alice\nbob smith\n", "line 2: 'bob smith'"),
+    ("alice\n../etc\n", "line 2: '../etc'"),
+    ("alice\n1bob\n", "line 2: '1bob'"),
+    ("x" * 32 + "\n", "line 1"),
+    ("alice\nbob\nalice\n", "line 3: 'alice' is already on line 1"),
+    ("alice\ninstructor\n", "line 2: 'instructor' is the instructor's account"),
+    ("# nobody\n\n", "names no student"),
+])
+def test_a_bad_class_file_is_refused_with_its_line(tmp_path, text, says):
+    f = tmp_path / "class.txt"
+    f.write_text(text)
+    with pytest.raises(hub.HubError, match=None) as e:
+        hub.read_class(f)
+    assert says in str(e.value)
+
+
+def test_an_unreadable_class_file_is_named(tmp_path):
+    with pytest.raises(hub.HubError, match="cannot read the class file"):
+        hub.read_class(tmp_path / "missing.txt")
+    (tmp_path / "bin.txt").write_bytes(b"\xff\xfe\x00")
+    with pytest.raises(hub.HubError, match="cannot read the class file"):
+        hub.read_class(tmp_path / "bin.txt")
+
+
+# -- accounts -------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("name", ["root", "daemon", "nobody"])
+def test_an_account_the_course_did_not_make_is_refused(name):
+    with pytest.raises(hub.HubError, match="did not create"):
+        hub.account_status(name)
+
+
+@root_only
+def test_a_student_account_is_made_once_private_and_marked():
+    name = f"annslamt{os.getpid() % 100000}"
+    try:
+        assert hub.account_status(name) == "missing"
+        entry = hub.ensure_account(name)
+        assert entry.pw_gecos.split(",")[0] == hub.MARK
+        assert os.stat(entry.pw_dir).st_mode & 0o777 == 0o700
+        assert os.stat(entry.pw_dir).st_uid == entry.pw_uid
+        os.chmod(entry.pw_dir, 0o755)                    # opened by hand: closed again
+        again = hub.ensure_account(name)
+        assert again.pw_uid == entry.pw_uid and hub.account_status(name) == "course"
+        assert os.stat(entry.pw_dir).st_mode & 0o777 == 0o700
+    finally:
+        subprocess.run(["userdel", "--remove", name], capture_output=True)
+    with pytest.raises(KeyError):
+        pwd.getpwnam(name)
+
+
+# -- each role's configuration --------------------------------------------------------------
+
+def test_students_get_the_exchange_but_not_formgrader_or_assignment_creation(tmp_path):
+    layout = hub.HubLayout(tmp_path)
+    st = hub.write_role_config(layout, "student")
+    ins = hub.write_role_config(layout, "instructor")
+    server = json.loads((st / "jupyter_server_config.json").read_text())
+    off = server["ServerApp"]["jpserver_extensions"]
+    assert off == {"nbgrader.server_extensions.formgrader": False,
+                   "nbgrader.server_extensions.course_list": False}
+    lab = json.loads((st / "labconfig" / "page_config.json").read_text())["disabledExtensions"]
+    assert set(lab) == {"@jupyter/nbgrader:formgrader", "@jupyter/nbgrader:create-assignment",
+                        "@jupyter/nbgrader:course-list"}
+    assert json.loads((ins / "labconfig" / "page_config.json").read_text()) == {
+        "disabledExtensions": {}}
+    # nbgrader reads these files itself: its own loader, not ours
+    cfg = {}
+    for role, folder in [("student", st), ("instructor", ins)]:
+        c = Config()
+        exec((folder / "nbgrader_config.py").read_text(), {"get_config": lambda c=c: c})
+        cfg[role] = c
+        assert c.Exchange.root == str(tmp_path / "exchange")
+        assert c.CourseDirectory.course_id == hub.COURSE_ID
+    assert cfg["instructor"].CourseDirectory.root == str(tmp_path / "course")
+    assert "root" not in cfg["student"].CourseDirectory
+    for p in [st, *st.rglob("*")]:
+        assert p.stat().st_mode & 0o777 == (0o755 if p.is_dir() else 0o644)
+
+
+def test_the_lab_plugins_switched_off_exist_in_nbgrader():
+    """A misspelt plugin id would switch nothing off: the ids must be nbgrader's own."""
+    ext = Path(sys.prefix) / "share" / "jupyter" / "labextensions" / "@jupyter" / "nbgrader"
+    if not ext.exists():
+        pytest.skip("nbgrader is not installed here (environment-instructor.txt)")
+    shipped = "".join(p.read_text(errors="ignore") for p in (ext / "static").glob("*.js"))
+    for plugin in hub.STUDENT_DISABLED["lab"]:
+        assert f'"{plugin}"' in shipped
+    import importlib
+    for module in hub.STUDENT_DISABLED["server"]:
+        importlib.import_module(module)
+
+
+def test_a_server_has_one_blas_thread_the_shared_data_and_its_role(tmp_path):
+    layout = hub.HubLayout(tmp_path)
+    env = hub.server_env(layout, "student")
+    assert env["PATH"].split(":")[0] == str(tmp_path / "student-env" / "bin")
+    assert env["ANNSLAM_DATA"] == str(tmp_path / "data")
+    assert env["JUPYTER_CONFIG_DIR"] == str(tmp_path / "etc" / "student")
+    assert env["OMP_NUM_THREADS"] == env["OPENBLAS_NUM_THREADS"] == "1"
+
+
+# -- JupyterHub's settings ------------------------------------------------------------------
+
+def _configured(tmp_path, **extra) -> Config:
+    f = tmp_path / "class.txt"
+    f.write_text("alice\nbob\n")
+    c = Config()
+    hub_config.configure(c, {"ANNSLAM_HUB_DIR": str(tmp_path), "ANNSLAM_HUB_CLASS": str(f),
+                             "ANNSLAM_HUB_PORT": "8123", "ANNSLAM_HUB_PASSWORD": "p" * 8,
+                             "ANNSLAM_HUB_INSTRUCTOR_PASSWORD": "i" * 32, **extra})
+    return c
+
+
+def test_the_hub_listens_on_loopback_and_lets_in_only_the_class(tmp_path):
+    c = _configured(tmp_path)
+    assert (c.JupyterHub.ip, c.JupyterHub.port, c.JupyterHub.hub_ip) == ("127.0.0.1", 8123,
+                                                                         "127.0.0.1")
+    assert c.JupyterHub.hub_port == 8124
+    assert c.ConfigurableHTTPProxy.api_url == "http://127.0.0.1:8125"
+    assert c.Authenticator.allowed_users == {"alice", "bob"}
+    assert c.Authenticator.admin_users == {"instructor"}
+    assert c.JupyterHub.authenticator_class == "shared-password"
+    assert c.JupyterHub.spawner_class == "localprocess"
+    assert c.Spawner.cmd[:4] == [str(tmp_path / "student-env" / "bin" / "python"), "-m",
+                                 "annslam_lib", "singleuser"]
+    assert str(tmp_path / "state") in c.JupyterHub.db_url
+    assert "services" not in c.JupyterHub
+    hub_config.check_spawner(c)
+
+
+def test_an_admin_token_becomes_a_service_with_admin_scopes(tmp_path):
+    c = _configured(tmp_path, ANNSLAM_HUB_ADMIN_TOKEN="t" * 40)
+    assert c.JupyterHub.services == [{"name": "course-admin", "api_token": "t" * 40}]
+    scopes = c.JupyterHub.load_roles[0]["scopes"]
+    assert {"admin:users", "admin:servers", "access:servers"} <= set(scopes)
+
+
+@pytest.mark.parametrize("spawner", ["simple", "jupyterhub.spawner.SimpleLocalProcessSpawner"])
+def test_a_spawner_without_isolation_is_refused(tmp_path, spawner):
+    c = _configured(tmp_path)
+    c.JupyterHub.spawner_class = spawner
+    with pytest.raises(hub.HubError, match="any student could read"):
+        hub_config.check_spawner(c)
+
+
+def test_the_config_file_is_refused_without_a_class(tmp_path):
+    with pytest.raises(hub.HubError, match="ANNSLAM_HUB_CLASS"):
+        hub_config.configure(Config(), {"ANNSLAM_HUB_DIR": str(tmp_path)})
+
+
+@pytest.mark.parametrize("student, instructor, says", [
+    ("", "i" * 32, "ANNSLAM_HUB_PASSWORD"),
+    ("short", "i" * 32, "8 characters"),
+    ("p" * 8, "i" * 31, "32 characters"),
+    ("p" * 40, "p" * 40, "must differ"),
+])
+def test_weak_or_missing_passwords_are_refused(tmp_path, student, instructor, says):
+    layout = hub.HubLayout(tmp_path)
+    layout.state.mkdir()
+    with pytest.raises(hub.HubError, match=says):
+        hub_setup.passwords(layout, {"ANNSLAM_HUB_PASSWORD": student,
+                                     "ANNSLAM_HUB_INSTRUCTOR_PASSWORD": instructor})
+
+
+def test_an_instructor_password_is_made_once_and_kept_private(tmp_path):
+    layout = hub.HubLayout(tmp_path)
+    layout.state.mkdir()
+    first = hub_setup.passwords(layout, {"ANNSLAM_HUB_PASSWORD": "p" * 8})
+    again = hub_setup.passwords(layout, {"ANNSLAM_HUB_PASSWORD": "p" * 8})
+    assert first == again and len(first["ANNSLAM_HUB_INSTRUCTOR_PASSWORD"]) >= 32
+    assert (layout.state / "instructor-password").stat().st_mode & 0o777 == 0o600
+
+
+def test_the_hub_refuses_to_start_twice_and_says_where(tmp_path):
+    import http.server
+    import threading
+
+    class Api(http.server.BaseHTTPRequestHandler):
+        def do_GET(self):
+            self.send_response(200 if self.path == "/hub/api" else 404)
+            self.end_headers()
+
+        def log_message(self, *a):
+            pass
+
+    srv = http.server.HTTPServer(("127.0.0.1", 0), Api)
+    threading.Thread(target=srv.serve_forever, daemon=True).start()
+    try:
+        layout = hub.HubLayout(tmp_path)
+        layout.state.mkdir()
+        url = f"http://127.0.0.1:{srv.server_port}"
+        (layout.state / "hub.json").write_text(json.dumps({"pid": os.getpid(), "url": url}))
+        assert hub.running_hub(layout) == url
+        f = tmp_path / "class.txt"
+        f.write_text("alice\n")
+        if os.geteuid() == 0:
+            with pytest.raises(hub.HubError, match=f"already running from {tmp_path} at {url}"):
+                hub_setup.prepare(layout, f)
+        (layout.state / "hub.json").write_text(json.dumps({"pid": 2 ** 22 + 7, "url": url}))
+        assert hub.running_hub(layout) is None          # its process is gone
+    finally:
+        srv.shutdown()
+
+
+# -- the students' environment --------------------------------------------------------------
+
+def test_the_student_environment_is_pinned_like_the_course_without_test_tools():
+    student, course, hubreq = (_reqs("environment-student.txt"), _reqs("environment.txt"),
+                               _reqs("environment-hub.txt"))
+    assert all(v for v in student.values()), "every requirement pinned with =="
+    for pkg, version in student.items():
+        if pkg in course:
+            assert version == course[pkg], pkg
+    for tool in ("pytest", "pytest-xdist", "nbval", "hypothesis", "ruff", "playwright",
+                 "pytest-timeout", "evo"):
+        assert tool not in student
+    assert student["jupyterhub"] == hubreq["jupyterhub"]
+    assert student["nbgrader"] == _reqs("environment-instructor.txt")["nbgrader"]
+    for pkg in ("jupyterlab", "ipykernel", "ipywidgets", "numpy", "scipy", "matplotlib",
+                'torch;sys_platform == "linux"'):
+        assert pkg in student, pkg
+    assert "-e ." not in (ROOT / "environment-student.txt").read_text()
+
+
+# -- a student's folder, filled as that student ---------------------------------------------
+
+def test_released_versions_are_copied_once_and_the_students_work_is_kept(tmp_path):
+    rel = tmp_path / "release"
+    release.release(COURSE[:3], rel)
+    books = sorted(rel.glob("*.ipynb"))
+    mine = tmp_path / "home" / "course"
+    r = workspace.sync(mine, books, released=True)
+    assert sorted(r.added) == [p.name for p in books]
+    for p in books:
+        assert nbformat.read(mine / p.name, 4) == nbformat.read(p, 4)
+    edited = mine / books[0].name
+    edited.write_text(edited.read_text() + " ")
+    r2 = workspace.sync(mine, books, released=True)
+    assert r2.kept == [books[0].name] and sorted(r2.unchanged) == [p.name for p in books[1:]]
+    assert edited.read_text().endswith(" ")
+
+
+def test_an_instructor_notebook_in_the_release_folder_is_never_copied(tmp_path):
+    rel = tmp_path / "release"
+    rel.mkdir()
+    (rel / COURSE[1].name).write_bytes(COURSE[1].read_bytes())    # solutions inside
+    with pytest.raises(ValueError, match="not a student version"):
+        workspace.sync(tmp_path / "me", [rel / COURSE[1].name], released=True)
+    assert not (tmp_path / "me" / COURSE[1].name).exists()
+
+
+def test_world_runnable_sees_a_private_folder_on_the_way(tmp_path):
+    private = tmp_path / "private"
+    private.mkdir()
+    exe = private / "python"
+    exe.write_text("#!/bin/sh\n")
+    os.chmod(exe, 0o755)
+    os.chmod(tmp_path, 0o755)
+    os.chmod(private, 0o700)
+    assert not hub._world_runnable(exe) and not hub.reachable_by_others(private)
+    os.chmod(private, 0o755)
+    assert hub._world_runnable(exe) == all(
+        p.stat().st_mode & 0o001 for p in tmp_path.resolve().parents)
+    os.chmod(exe, 0o744)
+    assert not hub._world_runnable(exe)
+
+
+def test_group_of_a_new_account_is_its_own(tmp_path):
+    """useradd's default user group: no student shares a group with another."""
+    if os.geteuid() != 0:
+        pytest.skip("creates Unix accounts: needs root")
+    names = [f"annslamg{os.getpid() % 10000}{i}" for i in range(2)]
+    try:
+        entries = [hub.ensure_account(n) for n in names]
+        groups = [grp.getgrgid(e.pw_gid).gr_name for e in entries]
+        assert groups == names
+    finally:
+        for n in names:
+            subprocess.run(["userdel", "--remove", n], capture_output=True)
+
+
+def test_the_hub_refuses_to_open_the_instructors_notebooks_to_students(tmp_path):
+    if not hub.reachable_by_others(ROOT / "notebooks"):
+        pytest.skip("this checkout's notebooks are already closed to other users")
+    f = tmp_path / "class.txt"
+    f.write_text("alice\n")
+    with pytest.raises(hub.HubError, match="could read the instructor's notebooks") as e:
+        hub_setup.start(hub.HubLayout(tmp_path / "hub"), f)
+    assert f"chmod o-rwx {ROOT / 'notebooks'}" in str(e.value)
+    assert not (tmp_path / "hub").exists()              # refused before anything was made
+
+
+def test_only_root_may_prepare_a_hub(tmp_path, monkeypatch):
+    monkeypatch.setattr(os, "geteuid", lambda: 1000)
+    with pytest.raises(hub.HubError, match="start it as root"):
+        hub_setup.prepare(hub.HubLayout(tmp_path), tmp_path / "class.txt")
