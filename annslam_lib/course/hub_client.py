@@ -142,7 +142,10 @@ class Kernel:
                         "user_expressions": {}, "allow_stdin": False,
                         "stop_on_error": False}}))
         out, error = [], None
+        replied = idle = False
         self.ws.settimeout(deadline)
+        # The shell reply and the iopub output reach the websocket by different sockets, in
+        # no fixed order: the execution is over when both the reply and iopub's "idle" came.
         while time.monotonic() - t0 < deadline:
             msg = json.loads(self.ws.recv())
             if msg.get("parent_header", {}).get("msg_id") != msg_id:
@@ -153,6 +156,10 @@ class Kernel:
             elif kind == "error":
                 error = f"{msg['content']['ename']}: {msg['content']['evalue']}"
             elif kind == "execute_reply":
+                replied = True
+            elif kind == "status" and msg["content"].get("execution_state") == "idle":
+                idle = True
+            if replied and idle:
                 return Execution("".join(out), error, time.monotonic() - t0)
         raise TimeoutError(f"no reply from {self.user}'s kernel in {deadline:.0f} s")
 

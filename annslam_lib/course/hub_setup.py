@@ -67,7 +67,7 @@ def copy_data(layout: HubLayout) -> None:
     downloaded there first if missing), then verified where it lies."""
     from ..data import fetch, registry
 
-    names = [e.name for e in registry.core()]
+    names = registry.core()
     sources = {n: fetch.ensure(n, progress=False) for n in names}
     before = os.environ.get(fetch.ENV_DIR)
     os.environ[fetch.ENV_DIR] = str(layout.data)
