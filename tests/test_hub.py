@@ -11,6 +11,8 @@ import sys
 
 import pytest
 from hub_support import prepared_layout
+from hub_browser import Student, cell_index, launch_browser, solution_source
+from browser_support import why_no_browser
 
 from annslam_lib.course import hub_setup
 from annslam_lib.course.hub_client import launch, remove_accounts
@@ -25,7 +27,7 @@ def class_hub(tmp_path_factory):
     modes = {p: p.stat().st_mode & 0o777 for p in PRIVATE}
     for p in PRIVATE:                 # the hub refuses to open them to students (tested below)
         os.chmod(p, modes[p] & ~0o007)
-    names = [f"hubt{os.getpid() % 100000}{c}" for c in "ab"]
+    names = [f"hubt{os.getpid() % 100000}{c}" for c in "abc"]
     tmp = tmp_path_factory.mktemp("hub")
     h = None
     try:
@@ -41,7 +43,7 @@ def class_hub(tmp_path_factory):
 
 
 def test_each_student_runs_as_themselves_in_a_private_home_with_the_course(class_hub):
-    h, (a, _) = class_hub
+    h, (a, *_) = class_hub
     h.api.start_server(a)
     status, listing = h.api.request("GET", f"/user/{a}/api/contents/")
     assert status == 200
@@ -60,7 +62,7 @@ def test_each_student_runs_as_themselves_in_a_private_home_with_the_course(class
 
 
 def test_a_students_kernel_cannot_read_or_change_another_students_files(class_hub):
-    h, (a, b) = class_hub
+    h, (a, b, _) = class_hub
     h.api.start_server(a)
     h.api.start_server(b)
     wrote = h.api.run(a, "import os\np = os.path.expanduser('~/course/answer.txt')\n"
@@ -91,7 +93,7 @@ def test_a_students_kernel_cannot_read_or_change_another_students_files(class_hu
 
 
 def test_only_listed_students_log_in_with_the_students_password(class_hub):
-    h, (a, _) = class_hub
+    h, (a, *_) = class_hub
     pw = h.passwords["ANNSLAM_HUB_PASSWORD"]
     assert h.api.login(a, pw) == 302
     assert h.api.login("mallory", pw) == 403
@@ -102,7 +104,7 @@ def test_only_listed_students_log_in_with_the_students_password(class_hub):
 
 
 def test_formgrader_is_not_served_to_students(class_hub):
-    h, (a, _) = class_hub
+    h, (a, *_) = class_hub
     h.api.start_server(a)
     assert h.api.request("GET", f"/user/{a}/formgrader")[0] == 404
     status, body = h.api.request("GET", f"/user/{a}/assignments?course_id=annslam")
@@ -110,7 +112,7 @@ def test_formgrader_is_not_served_to_students(class_hub):
 
 
 def test_a_hub_started_twice_says_where_the_running_one_is(class_hub, tmp_path):
-    h, (a, _) = class_hub
+    h, (a, *_) = class_hub
     f = tmp_path / "class.txt"
     f.write_text(f"{a}\n")
     env = dict(os.environ, ANNSLAM_HUB_DIR=str(h.layout.root), **h.passwords)
@@ -120,3 +122,80 @@ def test_a_hub_started_twice_says_where_the_running_one_is(class_hub, tmp_path):
     assert out.returncode == 2
     assert f"already running from {h.layout.root} at {h.url}" in out.stderr
     assert json.loads((h.layout.state / "hub.json").read_text())["url"] == h.url
+
+
+CHAPTER = "01_kinematics"
+#: what each student answers: (exercise answered correctly, exercise answered wrongly)
+WRONG = {
+    "ex01-axle-speed": "def my_axle_speed(v_e, alpha, H, L):\n    return v_e\n",
+    "ex01-euler-step": "def my_euler_step(pose, control, dt, L, a, b):\n"
+                       "    return np.asarray(pose, dtype=float)\n",
+}
+ANSWERS = [("ex01-axle-speed", "ex01-euler-step"), ("ex01-euler-step", "ex01-axle-speed"),
+           ("ex01-process-jacobians", "ex01-axle-speed")]
+
+
+def _class(h, action: str) -> None:
+    env = dict(os.environ, ANNSLAM_HUB_DIR=str(h.layout.root))
+    out = subprocess.run([sys.executable, "-m", "annslam_lib", "class", action, CHAPTER],
+                         env=env, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, f"class {action}: {out.stdout[-3000:]}\n{out.stderr[-3000:]}"
+
+
+def test_a_class_of_three_fetches_answers_submits_and_sees_its_own_feedback(class_hub):
+    """The whole lab in Chromium: three students log in, fetch the chapter in the
+    Assignments panel, each answer one exercise right and one wrong, submit; the instructor
+    collects, grades with the course's grader and returns feedback; each student fetches it
+    and sees their own score."""
+    why = why_no_browser()
+    if why:
+        pytest.skip(why)
+    h, names = class_hub
+    source = ROOT / "notebooks" / f"{CHAPTER}.ipynb"
+    points = {gid.removesuffix("-tests"): cell["metadata"]["nbgrader"]["points"]
+              for cell in json.loads(source.read_text())["cells"]
+              for gid in [cell["metadata"].get("nbgrader", {}).get("grade_id", "")]
+              if cell["metadata"].get("nbgrader", {}).get("grade")}
+    _class(h, "release")
+    pw, browser = launch_browser()
+    students = []
+    try:
+        for name, (right, wrong) in zip(names, ANSWERS):
+            s = Student(browser, h.url, name)
+            students.append(s)
+            s.log_in(h.passwords["ANNSLAM_HUB_PASSWORD"])
+            s.assignments()
+            s.press("released", "Fetch", f"#fetched_assignments_list :text('{CHAPTER}')")
+            s.open_notebook(f"{CHAPTER}/{CHAPTER}.ipynb")
+            s.type_cell(cell_index(source, right), solution_source(source, right))
+            s.type_cell(cell_index(source, wrong), WRONG[wrong])
+            s.save()
+            s.assignments()
+            s.press("fetched", "Submit", f"#submitted_assignments_list :text('{CHAPTER}')")
+        _class(h, "collect")
+        _class(h, "grade")
+        _class(h, "feedback")
+        grades = {g["student"]: g for g in json.loads(
+            (h.layout.course / "grades" / f"{CHAPTER}.json").read_text())}
+        total = sum(points.values())
+        for s, (right, wrong) in zip(students, ANSWERS):
+            assert grades[s.name]["score"] == points[right], (s.name, grades[s.name])
+            s.page.reload()
+            s.assignments()
+            s.press("submitted", "Fetch Feedback",
+                    "#submitted_assignments_list a:text-is(' (view feedback)')")
+            page = s.view_feedback(f"{CHAPTER}.html")
+            assert f"{CHAPTER}: feedback for {s.name}\n" in page
+            assert f"Score: {points[right]:g} / {total:g}" in page
+            others = [n for n in names if n != s.name]
+            assert not any(n in page for n in others)
+            assert s.fetch_text(f"/user/{others[0]}/files/{CHAPTER}/feedback")[0] == 403
+    except Exception:
+        for s in students:
+            s.shot("failure")
+        raise
+    finally:
+        for s in students:
+            s.close()
+        browser.close()
+        pw.stop()

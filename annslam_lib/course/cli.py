@@ -350,6 +350,13 @@ def _singleuser(args: argparse.Namespace) -> int:
         print(f"singleuser: your course folder could not be written: {e}", file=sys.stderr)
         return 2
     print(f"== {report.summary()}", file=sys.stderr, flush=True)
+    # nbgrader's Assignments panel fetches into the process's working folder, not the
+    # server's root: start in ~/course. JupyterLab keeps user settings and workspaces under
+    # JUPYTER_CONFIG_DIR, the role's read-only folder here: give them the student's own.
+    os.chdir(Path.home() / "course")
+    for var, sub in (("JUPYTERLAB_SETTINGS_DIR", "user-settings"),
+                     ("JUPYTERLAB_WORKSPACES_DIR", "workspaces")):
+        os.environ.setdefault(var, str(Path.home() / ".jupyter" / "lab" / sub))
     exe = Path(sys.executable).parent / "jupyterhub-singleuser"
     os.execv(exe, [str(exe), *rest])
     return 0                                   # not reached
