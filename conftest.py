@@ -91,7 +91,7 @@ def pytest_configure(config):
 # no longer lets it do, and silently falls back to sending single tests.
 SPLIT = ("tests/test_browser_widgets_0508.py", "tests/test_browser_widgets_0104.py",
          "tests/test_student_run.py")
-HEAVY_FIRST = ("tests/test_browser_widgets_0508.py",
+HEAVY_FIRST = ("tests/test_hub.py", "tests/test_browser_widgets_0508.py",
                "tests/test_install.py", "tests/test_grader_nbgrader.py",
                "tests/test_browser_widgets_0104.py", "tests/test_grader_attacks.py",
                "notebooks/08", "notebooks/05", "notebooks/07", "notebooks/06",
