@@ -341,3 +341,45 @@ def test_only_root_may_prepare_a_hub(tmp_path, monkeypatch):
     monkeypatch.setattr(os, "geteuid", lambda: 1000)
     with pytest.raises(hub.HubError, match="start it as root"):
         hub_setup.prepare(hub.HubLayout(tmp_path), tmp_path / "class.txt")
+
+
+# -- the instructor's grade step ------------------------------------------------------------
+
+def test_a_submission_that_breaks_grading_gets_its_reason_and_the_others_are_graded(tmp_path):
+    """``class grade`` over a good and a corrupt submission: the corrupt one is named with
+    its reason, the good one scored, and each gets its feedback page."""
+    from annslam_lib.course import hub_class
+
+    chapter = "01_kinematics"
+    layout = hub.HubLayout(tmp_path / "hub")
+    nb = nbformat.read(release.release([ROOT / "notebooks" / f"{chapter}.ipynb"],
+                                       tmp_path / "rel")[0], as_version=4)
+    instructor = nbformat.read(ROOT / "notebooks" / f"{chapter}.ipynb", as_version=4)
+    for cell, theirs in zip(nb.cells, instructor.cells):
+        if cell.metadata.get("nbgrader", {}).get("grade_id") == "ex01-axle-speed":
+            cell.source = theirs.source                       # the solution, markers and all
+    for student, text in [("alice", nbformat.writes(nb)), ("mallory", '{"cells": [')]:
+        sub = layout.course / "submitted" / student / chapter / f"{chapter}.ipynb"
+        sub.parent.mkdir(parents=True)
+        sub.write_text(text)
+    grades = {g.student: g for g in hub_class.grade(layout, chapter, log=lambda *a: None)}
+    assert grades["alice"].graded and grades["alice"].score == 2 and grades["alice"].max_score == 7
+    assert not grades["mallory"].graded and "notebook" in grades["mallory"].reason.lower()
+    alice = (layout.course / "feedback/alice" / chapter / f"{chapter}.html").read_text()
+    mallory = (layout.course / "feedback/mallory" / chapter / f"{chapter}.html").read_text()
+    assert "Score: 2 / 7" in alice and "Not graded" in mallory
+    stored = json.loads((layout.course / "grades" / f"{chapter}.json").read_text())
+    assert sorted(g["student"] for g in stored) == ["alice", "mallory"]
+    assert (layout.course / "grades").stat().st_mode & 0o777 == 0o700
+
+
+def test_a_feedback_page_escapes_what_the_student_wrote():
+    from annslam_lib.course.grader import ExerciseResult, SubmissionGrade
+    from annslam_lib.course.hub_class import feedback_page
+
+    evil = "<script>alert(1)</script>"
+    g = SubmissionGrade("x.ipynb", "01_kinematics.ipynb", f"bob{evil}", "01_kinematics", 0, 2,
+                        [ExerciseResult("ex01-axle-speed", 0, 2, "failed", evil)],
+                        errors=[evil])
+    page = feedback_page(g)
+    assert "<script>" not in page and page.count("&lt;script&gt;") == 3
