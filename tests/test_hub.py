@@ -78,7 +78,7 @@ def test_a_students_kernel_cannot_read_or_change_another_students_files(class_hu
         "remove": f"os.remove({secret!r})",
         "instructor notebooks": f"os.listdir({str(ROOT / 'notebooks')!r})",
         "hub state": f"os.listdir({str(h.layout.state)!r})",
-        "shared data": f"open(os.path.join(os.environ['ANNSLAM_DATA'], 'x'), 'w')",
+        "shared data": "open(os.path.join(os.environ['ANNSLAM_DATA'], 'x'), 'w')",
         "student environment": f"open({str(h.layout.env / 'pyvenv.cfg')!r}, 'a')",
     }
     code = "import os\nfor what, expr in %r.items():\n" % attempts + (

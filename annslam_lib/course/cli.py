@@ -285,6 +285,13 @@ def _hub(args: argparse.Namespace) -> int:
 
     try:
         check_name(args.instructor)
+        if args.image_files:
+            from pathlib import Path
+
+            from .hub_setup import image_files
+
+            image_files(HubLayout(Path(args.image_files).resolve()))
+            return 0
         if args.prepare_only:
             prepare(HubLayout.from_env(), args.class_file, args.instructor)
             return 0
@@ -308,6 +315,9 @@ def _add_hub(sub) -> None:
     p.add_argument("--prepare-only", action="store_true",
                    help="set up the hub folder (students' environment, release, data, proxy) "
                    "and stop")
+    p.add_argument("--image-files", metavar="DIR",
+                   help="write what a single-user image holds (student versions, role "
+                   "configurations) into DIR, for hub/z2jh/Dockerfile and binder/, and stop")
     p.set_defaults(func=_hub)
 
 

@@ -115,6 +115,18 @@ def install_proxy(layout: HubLayout) -> Path:
     return exe
 
 
+def image_files(layout: HubLayout) -> None:
+    """What a single-user image holds of the hub folder (``hub/z2jh/Dockerfile``, and
+    ``binder/postBuild`` for repo2docker): the student versions and each role's Jupyter
+    configuration, laid out as on a local hub. No accounts, data or proxy: on Kubernetes the
+    data and the exchange are volumes, and each student is a pod."""
+    layout.root.mkdir(parents=True, exist_ok=True)
+    release_notebooks(layout)
+    for role in ("student", "instructor"):
+        write_role_config(layout, role)
+    open_to_all(layout.root)
+
+
 def passwords(layout: HubLayout, env) -> dict[str, str]:
     """The students' password (required) and the instructor's (generated once and kept in
     ``state/instructor-password`` when not given)."""
