@@ -7,8 +7,9 @@ real hub needs per student. Loopback only, bounded (every wait has a deadline), 
 The hub folder must be prepared (``./course.sh hub --prepare-only``). The script makes N
 short-lived student accounts (``loadNN``), starts all N servers at once and times how long
 until every one is ready; then each student opens a kernel and runs every code cell of the
-chapter's student version (errors at the unfinished exercises are expected and go on), all
-N at the same time. It prints each Run All's wall and kernel CPU time, the memory of each
+chapter as a student who has finished it would (the instructor version's cells, solutions
+included, so that nothing stops early at an unfinished exercise; any error is counted and
+printed), all N at the same time. It prints each Run All's wall and kernel CPU time, the memory of each
 server and kernel (RSS, from /proc), and derives, for a class of ``--class-size`` whose
 students all press Run All within ``--window`` seconds, the cores and GiB it needs. Then it
 stops the servers and deletes the accounts. Prints figures only (not a test).
@@ -28,7 +29,9 @@ from pathlib import Path
 
 from annslam_lib.course.hub import HubLayout
 from annslam_lib.course.hub_client import launch, remove_accounts
+from annslam_lib.course.hub_setup import PREPARED
 
+ROOT = Path(__file__).resolve().parents[1]
 PAGE = os.sysconf("SC_PAGE_SIZE")
 CPU_PROBE = ("import resource as _r; _u = _r.getrusage(_r.RUSAGE_SELF); "
              "print(_u.ru_utime + _u.ru_stime)")
@@ -90,10 +93,13 @@ def main(argv=None) -> int:
         print("hub_load: run as root (it makes student accounts)", file=sys.stderr)
         return 2
     layout = HubLayout.from_env()
-    notebook = layout.release / f"{args.chapter}.ipynb"
-    if not notebook.exists():
-        print(f"hub_load: {notebook} is missing: prepare the hub folder first "
+    if not (layout.root / PREPARED).exists():
+        print(f"hub_load: prepare the hub folder {layout.root} first "
               "(./course.sh hub --prepare-only)", file=sys.stderr)
+        return 2
+    notebook = ROOT / "notebooks" / f"{args.chapter}.ipynb"
+    if not notebook.exists():
+        print(f"hub_load: no chapter {args.chapter!r}", file=sys.stderr)
         return 2
     cells = code_cells(notebook)
     names = [f"load{i:02d}" for i in range(args.students)]

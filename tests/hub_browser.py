@@ -52,6 +52,12 @@ class Student:
         p.click(".lm-Menu-itemLabel:text-is('Assignment List')")
         p.wait_for_selector("#released_assignments_list", state="attached")
 
+    def refresh_assignments(self) -> None:
+        """The panel's refresh button: it lists the exchange again, now with feedback."""
+        p = self.page
+        p.click("#refresh_assignments_list")
+        p.wait_for_selector("#submitted_assignments_list :text('feedback available to fetch')")
+
     def press(self, listing: str, button: str, then: str, timeout: float = 60_000) -> None:
         """Click ``button`` in the panel's ``listing`` (released, fetched, submitted) and
         wait until ``then`` (a selector) is attached."""

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 
@@ -29,6 +30,9 @@ def class_hub(tmp_path_factory):
         os.chmod(p, modes[p] & ~0o007)
     names = [f"hubt{os.getpid() % 100000}{c}" for c in "abc"]
     tmp = tmp_path_factory.mktemp("hub")
+    # the class of this run only: no submission, grade or release of an earlier run
+    shutil.rmtree(layout.course, ignore_errors=True)
+    shutil.rmtree(layout.exchange, ignore_errors=True)
     h = None
     try:
         h = launch(layout, names, tmp)
@@ -78,6 +82,7 @@ def test_a_students_kernel_cannot_read_or_change_another_students_files(class_hu
         "remove": f"os.remove({secret!r})",
         "instructor notebooks": f"os.listdir({str(ROOT / 'notebooks')!r})",
         "hub state": f"os.listdir({str(h.layout.state)!r})",
+        "collected submissions": f"os.listdir({str(h.layout.course)!r})",
         "shared data": "open(os.path.join(os.environ['ANNSLAM_DATA'], 'x'), 'w')",
         "student environment": f"open({str(h.layout.env / 'pyvenv.cfg')!r}, 'a')",
     }
@@ -156,6 +161,8 @@ def test_a_class_of_three_fetches_answers_submits_and_sees_its_own_feedback(clas
               for cell in json.loads(source.read_text())["cells"]
               for gid in [cell["metadata"].get("nbgrader", {}).get("grade_id", "")]
               if cell["metadata"].get("nbgrader", {}).get("grade")}
+    for name in names:              # servers start while the chapter is released
+        h.api.start_server(name, wait=False)
     _class(h, "release")
     pw, browser = launch_browser()
     students = []
@@ -180,8 +187,7 @@ def test_a_class_of_three_fetches_answers_submits_and_sees_its_own_feedback(clas
         total = sum(points.values())
         for s, (right, wrong) in zip(students, ANSWERS):
             assert grades[s.name]["score"] == points[right], (s.name, grades[s.name])
-            s.page.reload()
-            s.assignments()
+            s.refresh_assignments()          # the panel is still open in the student's lab
             s.press("submitted", "Fetch Feedback",
                     "#submitted_assignments_list a:text-is(' (view feedback)')")
             page = s.view_feedback(f"{CHAPTER}.html")

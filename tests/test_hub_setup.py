@@ -95,6 +95,25 @@ def test_a_student_account_is_made_once_private_and_marked():
         pwd.getpwnam(name)
 
 
+@root_only
+def test_the_course_folder_goes_to_the_instructors_account_only(tmp_path):
+    layout = hub.HubLayout(tmp_path / "hub")
+    (layout.course / "submitted" / "alice").mkdir(parents=True)
+    (layout.course / "submitted" / "alice" / "x.ipynb").write_text("{}")
+    os.chmod(layout.course, 0o755)
+    assert hub.give_course(layout, "root") is False            # not an account of the course
+    assert hub.give_course(layout, f"nobody{os.getpid() % 1000}x") is False      # missing
+    name = f"annslami{os.getpid() % 100000}"
+    try:
+        entry = hub.ensure_account(name)
+        assert hub.give_course(layout, name) is True
+        assert layout.course.stat().st_mode & 0o777 == 0o700
+        assert {p.stat().st_uid for p in [layout.course, *layout.course.rglob("*")]} == {
+            entry.pw_uid}
+    finally:
+        subprocess.run(["userdel", "--remove", name], capture_output=True)
+
+
 # -- each role's configuration --------------------------------------------------------------
 
 def test_students_get_the_exchange_but_not_formgrader_or_assignment_creation(tmp_path):

@@ -323,11 +323,15 @@ def _add_hub(sub) -> None:
 
 def _class(args: argparse.Namespace) -> int:
     from .grader import GradingEnvironmentError
-    from .hub import HubError, HubLayout
+    from .hub import HubError, HubLayout, give_course
     from .hub_class import ACTIONS
 
     try:
-        ACTIONS[args.action](HubLayout.from_env(), args.chapter)
+        layout = HubLayout.from_env()
+        try:
+            ACTIONS[args.action](layout, args.chapter)
+        finally:                     # what root wrote there, back to the instructor's account
+            give_course(layout, args.instructor)
     except GradingEnvironmentError as e:
         print(f"class grade: the grading environment is broken, so no submission was scored "
               f"from here on: {e}", file=sys.stderr)
@@ -343,6 +347,9 @@ def _add_class(sub) -> None:
                        "release, collect, grade, feedback of one chapter")
     p.add_argument("action", choices=["release", "collect", "grade", "feedback"])
     p.add_argument("chapter", help="a notebook's name without .ipynb, e.g. 03_observation")
+    p.add_argument("--instructor", default="instructor", metavar="NAME",
+                   help="the instructor's account, owner of the course folder (default "
+                   "instructor)")
     p.set_defaults(func=_class)
 
 

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 __all__ = ["HubError", "HubLayout", "ENV_DIR", "COURSE_ID", "MARK", "read_class",
-           "check_name", "account_status", "ensure_account", "running_hub", "write_role_config",
+           "check_name", "account_status", "ensure_account", "give_course", "running_hub", "write_role_config",
            "server_env", "STUDENT_DISABLED", "INSTRUCTOR_DISABLED", "system_python",
            "reachable_by_others", "open_to_all"]
 
@@ -152,6 +152,23 @@ def ensure_account(name: str) -> pwd.struct_passwd:
     entry = pwd.getpwnam(name)
     os.chmod(entry.pw_dir, 0o700)            # useradd without HOME_MODE support made 0755
     return entry
+
+
+def give_course(layout: HubLayout, instructor: str) -> bool:
+    """The nbgrader course folder (sources, every student's collected submission, grades,
+    feedback) to the instructor's account, mode 0700: nobody else's kernel can read it, and
+    the instructor's formgrader can work in it. False while that account does not exist yet
+    (it is made when the instructor's server first starts)."""
+    try:
+        if account_status(instructor) != "course":
+            return False
+    except HubError:
+        return False
+    entry = pwd.getpwnam(instructor)
+    os.chmod(layout.course, 0o700)
+    for p in [layout.course, *layout.course.rglob("*")]:
+        os.lchown(p, entry.pw_uid, entry.pw_gid)
+    return True
 
 
 def server_env(layout: HubLayout, role: str) -> dict[str, str]:

@@ -16,8 +16,10 @@ Swapping the parts a university changes:
   class file.
 - **Spawner.** ``LocalProcessSpawner`` (the default) with one Unix account per student is
   the isolation on one machine. For Docker, ``dockerspawner.DockerSpawner`` with the image of
-  ``hub/Dockerfile``; for a cluster, Zero to JupyterHub (``KubeSpawner``), configured by its
-  ``config.yaml`` instead of this file. ``SimpleLocalProcessSpawner`` is refused: it runs
+  ``hub/z2jh/Dockerfile`` (its ``cmd`` is the image's; mount the data read-only at
+  ``/srv/annslam/data`` and the exchange at ``/srv/annslam/exchange``, and give each student
+  a uid of their own, as ``hub/z2jh/config.yaml`` does); for a cluster, Zero to JupyterHub
+  (``KubeSpawner``), configured by ``hub/z2jh/config.yaml`` instead of this file. ``SimpleLocalProcessSpawner`` is refused: it runs
   every student's server as the hub's own user, so any student could read every home.
 """
 from __future__ import annotations
@@ -25,7 +27,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from .hub import HubError, HubLayout, ensure_account, read_class, server_env
+from .hub import HubError, HubLayout, ensure_account, give_course, read_class, server_env
 
 __all__ = ["configure", "check_spawner", "pre_spawn", "REFUSED_SPAWNERS", "SETTINGS"]
 
@@ -56,6 +58,8 @@ def pre_spawn(spawner) -> None:
     spawner.notebook_dir = str(Path(entry.pw_dir) / "course")
     spawner.popen_kwargs = {**spawner.popen_kwargs, "cwd": entry.pw_dir}  # not the hub's
     spawner.environment = {**spawner.environment, **server_env(layout, _role(spawner))}
+    if _role(spawner) == "instructor":
+        give_course(layout, spawner.user.name)            # formgrader works in it
 
 
 def configure(c, env=None) -> None:

@@ -33,7 +33,7 @@ def say(text: str) -> None:
 
 def _folders(layout: HubLayout) -> None:
     for folder, mode in [(layout.root, 0o755), (layout.state, 0o700), (layout.release, 0o755),
-                         (layout.data, 0o755), (layout.course, 0o755), (layout.etc, 0o755),
+                         (layout.data, 0o755), (layout.course, 0o700), (layout.etc, 0o755),
                          (layout.exchange, 0o1777)]:
         folder.mkdir(parents=True, exist_ok=True)
         os.chmod(folder, mode)
