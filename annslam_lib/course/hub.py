@@ -16,7 +16,8 @@ unless said otherwise:
 - ``release/``       the student versions; each student's server copies them, as that
   student, into ``~/course`` (added when missing, never overwriting the student's work);
 - ``exchange/``      nbgrader's exchange (mode 1777, as nbgrader requires);
-- ``course/``        the instructor's nbgrader course folder (source, submitted, feedback);
+- ``course/``        the instructor's nbgrader course folder (source, submitted, grades,
+  feedback): the instructor's account's only, mode 0700 (:func:`give_course`);
 - ``etc/student/``, ``etc/instructor/``   the Jupyter configuration of each role
   (nbgrader's exchange and course id; formgrader and assignment creation only for the
   instructor);
