@@ -147,7 +147,12 @@ class Kernel:
         # The shell reply and the iopub output reach the websocket by different sockets, in
         # no fixed order: the execution is over when both the reply and iopub's "idle" came.
         while time.monotonic() - t0 < deadline:
-            msg = json.loads(self.ws.recv())
+            frame = self.ws.recv()
+            if isinstance(frame, bytes):
+                # a message with binary buffers (a widget's or a comm's): never one of the
+                # execution's reply, status, stream or error messages read here
+                continue
+            msg = json.loads(frame)
             if msg.get("parent_header", {}).get("msg_id") != msg_id:
                 continue
             kind = msg["msg_type"]
