@@ -85,7 +85,8 @@ def pytest_configure(config):
 # are independent Run Alls of one chapter each (in JupyterLab; with nbclient where there is
 # no browser), which go to whichever worker is free. Work is
 # handed out longest first (HEAVY_FIRST, then the rest in collection order; inside a SPLIT
-# module the later, longer chapters first), so that no worker is left with a long test at
+# module the later, longer chapters first; every notebook before the short test modules),
+# so that no worker is left with a long test at
 # the end while the other idles (`--no-loadscope-reorder` keeps this order). xdist's own
 # `--dist loadgroup` cannot do this with pytest 9.2: it renames node ids, which pytest 9.2
 # no longer lets it do, and silently falls back to sending single tests.
@@ -94,7 +95,7 @@ SPLIT = ("tests/test_browser_widgets_0508.py", "tests/test_browser_widgets_0104.
 HEAVY_FIRST = ("tests/test_hub.py", "tests/test_browser_widgets_0508.py",
                "tests/test_install.py", "tests/test_grader_nbgrader.py",
                "tests/test_browser_widgets_0104.py", "tests/test_grader_attacks.py",
-               "notebooks/08", "notebooks/05", "notebooks/07", "notebooks/06",
+               "notebooks/08", "notebooks/05", "notebooks/07", "notebooks/06", "notebooks/",
                "tests/test_consistency.py", "tests/test_browser.py",
                "tests/test_figure_regression.py", "tests/test_workspace.py")
 
