@@ -9,10 +9,10 @@ short-lived student accounts (``loadNN``), starts all N servers at once and time
 until every one is ready; then each student opens a kernel and runs every code cell of the
 chapter as a student who has finished it would (the instructor version's cells, solutions
 included, so that nothing stops early at an unfinished exercise; any error is counted and
-printed), all N at the same time. It prints each Run All's wall and kernel CPU time, the memory of each
-server and kernel (RSS, from /proc), and derives, for a class of ``--class-size`` whose
-students all press Run All within ``--window`` seconds, the cores and GiB it needs. Then it
-stops the servers and deletes the accounts. Prints figures only (not a test).
+printed), all N at the same time. It prints each Run All's wall and kernel CPU time, the
+memory of each server and kernel (RSS, from /proc), and derives, for a class of
+``--class-size`` whose students all press Run All within ``--window`` seconds, the cores and
+GiB it needs. Then it stops the servers and deletes the accounts. Prints figures only (not a test).
 """
 from __future__ import annotations
 

@@ -61,6 +61,15 @@ def chromium_path() -> str | None:
     return "/usr/bin/chromium" if os.access("/usr/bin/chromium", os.X_OK) else shutil.which("chromium")
 
 
+def launch_chromium():
+    """(playwright, browser): the system Chromium, started by playwright with CHROMIUM_ARGS;
+    stop both with ``browser.close(); playwright.stop()``."""
+    from playwright.sync_api import sync_playwright
+
+    pw = sync_playwright().start()
+    return pw, pw.chromium.launch(executable_path=chromium_path(), args=CHROMIUM_ARGS)
+
+
 def serve_copy(notebook: Path, folder: Path) -> Path:
     """Copy ``notebook`` into ``folder`` without outputs, execution counts or saved widget state.
 

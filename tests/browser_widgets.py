@@ -30,7 +30,7 @@ import time
 
 import matplotlib
 import pytest
-from browser_support import (ARTIFACTS, CHROMIUM_ARGS, REPO, chromium_path, start_lab,
+from browser_support import (ARTIFACTS, REPO, chromium_path, launch_chromium, start_lab,
                              wait_run_all, why_no_browser)
 from student_run_checks import check_student_run
 
@@ -113,9 +113,7 @@ def lab(chromium, car_park, victoria_park, tmp_path_factory, request):
 
 @pytest.fixture(scope="module")
 def browser(chromium):
-    from playwright.sync_api import sync_playwright
-    pw = sync_playwright().start()
-    b = pw.chromium.launch(executable_path=chromium, args=CHROMIUM_ARGS)
+    pw, b = launch_chromium()
     yield b
     b.close()
     pw.stop()

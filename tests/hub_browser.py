@@ -4,17 +4,9 @@ cells typed into and saved. Used by tests/test_hub.py; not a test module."""
 from __future__ import annotations
 
 import nbformat
-from browser_support import ARTIFACTS, CHROMIUM_ARGS, chromium_path
+from browser_support import ARTIFACTS
 
 PANEL = "#nbgrader-assignment-list, .nbgrader-AssignmentList, #released_assignments_list"
-
-
-def launch_browser():
-    """(playwright, browser) of the system Chromium."""
-    from playwright.sync_api import sync_playwright
-
-    pw = sync_playwright().start()
-    return pw, pw.chromium.launch(executable_path=chromium_path(), args=CHROMIUM_ARGS)
 
 
 class Student:

@@ -12,8 +12,8 @@ import sys
 
 import pytest
 from hub_support import prepared_layout
-from hub_browser import Student, cell_index, launch_browser, solution_source
-from browser_support import why_no_browser
+from browser_support import launch_chromium, why_no_browser
+from hub_browser import Student, cell_index, solution_source
 
 from annslam_lib.course import hub_setup
 from annslam_lib.course.hub_client import launch, remove_accounts
@@ -164,7 +164,7 @@ def test_a_class_of_three_fetches_answers_submits_and_sees_its_own_feedback(clas
     for name in names:              # servers start while the chapter is released
         h.api.start_server(name, wait=False)
     _class(h, "release")
-    pw, browser = launch_browser()
+    pw, browser = launch_chromium()
     students = []
     try:
         for name, (right, wrong) in zip(names, ANSWERS):

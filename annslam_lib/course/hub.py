@@ -37,9 +37,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 __all__ = ["HubError", "HubLayout", "ENV_DIR", "COURSE_ID", "MARK", "read_class",
-           "check_name", "account_status", "ensure_account", "give_course", "running_hub", "write_role_config",
-           "server_env", "STUDENT_DISABLED", "INSTRUCTOR_DISABLED", "system_python",
-           "reachable_by_others", "open_to_all"]
+           "check_name", "account_status", "ensure_account", "give_course", "running_hub",
+           "write_role_config", "server_env", "STUDENT_DISABLED", "INSTRUCTOR_DISABLED",
+           "system_python", "reachable_by_others", "open_to_all"]
 
 ENV_DIR = "ANNSLAM_HUB_DIR"
 DEFAULT_DIR = "/srv/annslam-hub"

@@ -19,8 +19,9 @@ Swapping the parts a university changes:
   ``hub/z2jh/Dockerfile`` (its ``cmd`` is the image's; mount the data read-only at
   ``/srv/annslam/data`` and the exchange at ``/srv/annslam/exchange``, and give each student
   a uid of their own, as ``hub/z2jh/config.yaml`` does); for a cluster, Zero to JupyterHub
-  (``KubeSpawner``), configured by ``hub/z2jh/config.yaml`` instead of this file. ``SimpleLocalProcessSpawner`` is refused: it runs
-  every student's server as the hub's own user, so any student could read every home.
+  (``KubeSpawner``), configured by ``hub/z2jh/config.yaml`` instead of this file.
+  ``SimpleLocalProcessSpawner`` is refused: it runs every student's server as the hub's own
+  user, so any student could read every home.
 """
 from __future__ import annotations
 
