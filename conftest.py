@@ -12,6 +12,9 @@ from __future__ import annotations
 
 import base64
 import io
+import os
+import shutil
+import tempfile
 
 import pytest
 
@@ -49,6 +52,7 @@ def _pngs(outputs) -> list[str]:
 
 
 def pytest_configure(config):
+    _own_study_cache(config)
     try:
         from nbval.plugin import IPyNbCell
     except ImportError:            # nbval not installed: nothing to extend
@@ -130,3 +134,15 @@ def pytest_xdist_make_scheduler(config, log):
             return nodeid if path in SPLIT else path
 
     return CourseScheduling(config, log)
+
+
+def _own_study_cache(config) -> None:
+    """One study cache for this test session (annslam_lib._cache), made here in the main
+    process and inherited by the workers and every kernel they start: each cached study is
+    computed at least once per session (never read from an earlier session's code), and the
+    second notebook run that needs it (nbval's, the browser's) reads it back."""
+    if hasattr(config, "workerinput") or os.environ.get("ANNSLAM_CACHE"):
+        return
+    folder = tempfile.mkdtemp(prefix="annslam-study-cache-")
+    os.environ["ANNSLAM_CACHE"] = folder
+    config.add_cleanup(lambda: shutil.rmtree(folder, ignore_errors=True))

@@ -184,7 +184,9 @@ def test_unreachable_index_falls_back_to_a_local_wheel_without_retrying(tmp_path
     (folder / wheel.name).symlink_to(wheel)
     venv = tmp_path / "venv"
     subprocess.run([_python(11), "-m", "venv", str(venv)], check=True)
-    env = _ordinary_env(ANNSLAM_TORCH_INDEX=dead, PIP_FIND_LINKS=str(folder))
+    # PIP_COMPILE=0: no bytecode compiled for torch (the fallback is what is tested here,
+    # and the size of a full set-up is checked by the test above)
+    env = _ordinary_env(ANNSLAM_TORCH_INDEX=dead, PIP_FIND_LINKS=str(folder), PIP_COMPILE="0")
     t0 = time.monotonic()
     code = ("import importlib.util, sys; from pathlib import Path;"
             "spec = importlib.util.spec_from_file_location('install', sys.argv[1]);"

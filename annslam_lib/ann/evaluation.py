@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .._cache import memoize
 from .network import TrainConfig, train
 from .samples import SPLITS, Split, TrainingSet, beacon_folds, chronological_split
 
@@ -73,9 +74,11 @@ class Evaluation:
 
 
 
+@memoize
 def evaluate(ts: TrainingSet, splits, config: TrainConfig | None = None, *,
              protocol: str = "") -> Evaluation:
-    """Train one model per split and score it on that split's test part."""
+    """Train one model per split and score it on that split's test part. Computed once per
+    machine, then read from the study cache (``annslam_lib._cache``)."""
     splits = list(splits)
     if not splits:
         raise ValueError("no splits to evaluate")
@@ -228,12 +231,14 @@ def _int_tuple(name: str, values, lo: int) -> tuple:
 
 
 
+@memoize
 def hidden_size_grid(ts: TrainingSet, hidden=(1, 2, 5, 10, 20, 40), seeds=range(5), *,
                      config: TrainConfig | None = None, leave_beacons_out: bool = True,
                      n_folds: int = 5) -> HiddenSizeGrid:
     """Train one network per (hidden size, seed) on ``ts`` (``config`` with ``hidden``
     and ``seed`` replaced): on the chronological split, and, if ``leave_beacons_out``,
-    in leave-beacons-out cross-validation with ``n_folds`` folds."""
+    in leave-beacons-out cross-validation with ``n_folds`` folds. Computed once per machine,
+    then read from the study cache (``annslam_lib._cache``)."""
     if not isinstance(ts, TrainingSet):
         raise TypeError(f"ts must be an TrainingSet, got {type(ts).__name__}")
     hidden = _int_tuple("hidden", hidden, 1)

@@ -15,13 +15,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _checks
+from .._cache import memoize as _memoize
 from ..data.records import Dataset
 from ..models.geometry import wrap_angle
 from ..models.uncertainty import chi2_quantile, mahalanobis2
 
 __all__ = ["chi2_quantile", "chi2_band", "Consistency", "nees_consistency", "scan_nis",
            "nis_consistency", "pose_nees", "map_nees", "MapConsistency", "map_consistency",
-           "correlation_matrix"]
+           "correlation_matrix", "MonteCarlo", "monte_carlo"]
 
 
 def chi2_band(dof, n=1, prob: float = 0.95) -> tuple[np.ndarray | float, np.ndarray | float]:
@@ -241,3 +242,45 @@ def map_consistency(values, dofs, *, prob: float = 0.95) -> MapConsistency:
     per = float(v.sum() / total)
     return MapConsistency(per_dof=per, lo=lo, hi=hi, dof=int(total), inside=bool(lo <= per <= hi),
                           runs=v / d, prob=_checks.probability("prob", prob))
+
+
+@dataclass(frozen=True)
+class MonteCarlo:
+    """The simulated filter on N runs (:func:`monte_carlo`): per-scan pose NEES and NIS
+    judged scan by scan, the landmarks each run mapped, and the final map's NEES."""
+
+    nees: Consistency
+    nis: Consistency
+    mapped: tuple
+    map: MapConsistency
+
+
+@_memoize
+def monte_carlo(seeds, motion_model: str = "euler") -> MonteCarlo:
+    """Run the simulated filter (``SlamConfig.for_dataset('simulated')`` with
+    ``motion_model``) on the simulator's runs ``seeds`` (laser detections only) and judge it
+    (notebook 05): the pose NEES and the NIS scan by scan over the runs, the landmarks
+    mapped per run, and the NEES of each final map with its joint covariance, summed over
+    the runs. Every run must keep every scan. Computed once per machine (``annslam_lib._cache``)."""
+    from ..data import simulate
+    from ..slam.config import SlamConfig
+    from ..slam.runner import run
+
+    sims = [simulate.simulate(seed=int(s), raw_laser=False) for s in seeds]
+    if not sims:
+        raise ValueError("monte_carlo needs at least one seed")
+    t_scan = sims[0].detections.t
+    cfg = SlamConfig.for_dataset("simulated", motion_model=motion_model)
+    nees, nis, dof, mapped, maps = [], [], [], [], []
+    for ds in sims:
+        r = run(ds, cfg, progress=False)
+        if not np.array_equal(r.scan_index, np.arange(len(ds.detections))):
+            raise RuntimeError("a simulated run skipped a scan: the per-scan statistics need all")
+        nees.append(pose_nees(r, ds))
+        s, d = scan_nis(r, len(ds.detections))
+        nis.append(s)
+        dof.append(d)
+        mapped.append(int(r.counts["landmarks"]))
+        maps.append(map_nees(r, ds))
+    return MonteCarlo(nees=nees_consistency(nees, t_scan), nis=nis_consistency(nis, dof, t_scan),
+                      mapped=tuple(mapped), map=map_consistency(*zip(*maps)))

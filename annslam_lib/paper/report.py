@@ -132,7 +132,7 @@ def reproduce(out, *, fast: bool = False, seeds: int = 5, log=print) -> dict:
         ds = load_car_park()
     if log is not None:
         log(f"reproduce: {ds.name}, {seeds} training seed(s), output in {out}")
-    st = study(ds, seeds=seeds, log=log)
+    st = study.uncached(ds, seeds=seeds, log=log)    # end to end: never from the study cache
     previous = matplotlib.get_backend()
     matplotlib.use("Agg")
     try:

@@ -51,6 +51,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import _checks, ann
+from .._cache import memoize
 from ..data import filter_default_names
 from ..data.records import Dataset
 from ..data.simulate import SimConfig, simulate
@@ -154,6 +155,7 @@ def _timer(log, timings: dict):
 
 
 
+@memoize(ignore=("log",))
 def study(dataset: Dataset, *, seeds=5, train_config: ann.TrainConfig | None = None,
           n_folds: int = 5, natural: dict | None = None, log=None) -> Study:
     """Run the three configurations and the control on ``dataset`` (module docstring):
@@ -161,7 +163,9 @@ def study(dataset: Dataset, *, seeds=5, train_config: ann.TrainConfig | None = N
     control, then the natural-feature run. ``seeds``: a count (0..n-1) or the seeds;
     ``train_config``: the network's settings (its seed is replaced by each seed);
     ``natural``: keyword arguments of :func:`point_features`; ``log``: a print-like
-    callable for progress (each stage and its time), None for silence."""
+    callable for progress (each stage and its time), None for silence. Computed once per
+    machine, then read from the study cache (``annslam_lib._cache``; ``log`` then says
+    nothing, and ``timings`` are those of the run that computed it)."""
     if isinstance(seeds, numbers.Integral) and not isinstance(seeds, bool):
         if seeds < 1:
             raise ValueError(f"seeds must be at least 1, got {seeds}")
@@ -292,6 +296,7 @@ def _plain_sim_run(error: tuple, route: str, seed: int):
 
 
 
+@memoize
 def transfer(error: dict | None = None, *, train_route: str = "loop", test_route: str = "figure8",
              seeds=(1, 2, 3, 4, 5), train_config: ann.TrainConfig | None = None) -> Transfer:
     """The simulator experiment of notebook 08: a known systematic sensor ``error``
@@ -300,7 +305,8 @@ def transfer(error: dict | None = None, *, train_route: str = "loop", test_route
     training set, chronological split. Test run k (``seeds``): ``test_route`` with layout
     and noise seed k (other beacons, and another route unless test_route = train_route),
     the same error; the plain filter and the ANN-enhanced one with a network trained with
-    ``TrainConfig(seed=k)``, so the spread covers the training seed and the layout."""
+    ``TrainConfig(seed=k)``, so the spread covers the training seed and the layout.
+    Computed once per machine, then read from the study cache (``annslam_lib._cache``)."""
     err = dict(error or {})
     bad = sorted(set(err) - {f.name for f in dataclasses.fields(SimConfig)})
     if bad:

@@ -1,0 +1,212 @@
+"""A study computed once per machine: results of the course's heavy experiments, kept in the
+user cache and checked on load (issue 23: a class's Run All is CPU seconds per student).
+
+:func:`memoize` wraps a deterministic library function (a Monte Carlo study, a grid of
+trained networks). A call's key is the SHA-256 of
+
+- the function's module and name,
+- the library's code: every ``.py`` file of ``annslam_lib`` (so any change to the code, or
+  to the data checksums it holds, makes every entry stale; nothing is reused across a
+  change that could alter a result),
+- the BLAS thread settings (``OMP_NUM_THREADS``, ``OPENBLAS_NUM_THREADS``,
+  ``MKL_NUM_THREADS``): another thread count may change a result at rounding level,
+- its arguments by content: numbers, strings, ``None``, tuples, lists, dicts, ranges,
+  dataclasses field by field and NumPy arrays by dtype, shape and bytes (a dataset passed
+  in is hashed whole). Anything else is refused with a TypeError: a key must never be a
+  guess.
+
+The entry is a pickle with its own SHA-256 beside it; an entry whose bytes do not match (a
+torn or edited file) is recomputed and rewritten, with a warning, and counted in
+:data:`STATS`. Writes are atomic (a temporary file renamed), so two kernels computing the
+same study at once leave one whole entry. The folder is ``ANNSLAM_CACHE`` if set, else
+``platformdirs.user_cache_dir('annslam')/studies``; ``ANNSLAM_CACHE=off`` turns the cache
+off. A pickle can run code when loaded, so entries are read only from a folder that is
+owned by the current user and not writable by group or others; any other folder is used as
+if it were empty (results computed, nothing written), with a warning.
+
+The results are the same as computed: the functions are seeded and deterministic, and a
+test recomputes a cached study and compares (tests/test_cache.py).
+"""
+from __future__ import annotations
+
+import dataclasses
+import functools
+import hashlib
+import os
+import pickle
+import stat
+import tempfile
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["memoize", "cache_dir", "clear", "key_of", "code_hash", "STATS"]
+
+#: Per process: hits, misses (computed and stored), repaired (corrupt entry recomputed),
+#: unusable (folder not safe or not writable: computed, not stored), unkeyed (an argument
+#: without a content hash: computed, not stored).
+STATS = {"hits": 0, "misses": 0, "repaired": 0, "unusable": 0, "unkeyed": 0}
+
+_ROOT = Path(__file__).resolve().parent
+_THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def cache_dir() -> Path | None:
+    """The cache folder, or None when ``ANNSLAM_CACHE=off``."""
+    env = os.environ.get("ANNSLAM_CACHE", "")
+    if env.lower() == "off":
+        return None
+    if env:
+        return Path(env).expanduser()
+    import platformdirs
+    return Path(platformdirs.user_cache_dir("annslam")) / "studies"
+
+
+@functools.lru_cache(maxsize=1)
+def code_hash() -> str:
+    """SHA-256 over the library's source files (path and bytes), in a fixed order."""
+    h = hashlib.sha256()
+    for p in sorted(_ROOT.rglob("*.py")):
+        h.update(p.relative_to(_ROOT).as_posix().encode() + b"\0")
+        h.update(p.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+def _feed(h, obj, path: str) -> None:
+    if obj is None or isinstance(obj, (bool, int, float, complex, str, bytes)):
+        h.update(f"{type(obj).__name__}:{obj!r};".encode())
+    elif isinstance(obj, np.generic):
+        _feed(h, obj.item(), path)
+    elif isinstance(obj, np.ndarray):
+        if obj.dtype == object:
+            raise TypeError(f"cache key: {path} is an object array")
+        a = np.ascontiguousarray(obj)
+        h.update(f"nd:{a.dtype.str}:{a.shape};".encode())
+        h.update(a.tobytes())
+    elif isinstance(obj, range):
+        h.update(f"range:{obj.start}:{obj.stop}:{obj.step};".encode())
+    elif isinstance(obj, (tuple, list)):
+        h.update(f"{type(obj).__name__}:{len(obj)}[".encode())
+        for i, v in enumerate(obj):
+            _feed(h, v, f"{path}[{i}]")
+        h.update(b"]")
+    elif isinstance(obj, dict):
+        h.update(f"dict:{len(obj)}{{".encode())
+        for k in sorted(obj, key=repr):
+            _feed(h, k, f"{path} key")
+            _feed(h, obj[k], f"{path}[{k!r}]")
+        h.update(b"}")
+    elif dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        h.update(f"dc:{type(obj).__module__}.{type(obj).__qualname__}(".encode())
+        for f in dataclasses.fields(obj):
+            h.update(f.name.encode() + b"=")
+            _feed(h, getattr(obj, f.name), f"{path}.{f.name}")
+        h.update(b")")
+    else:
+        raise TypeError(f"cache key: {path} is a {type(obj).__name__}, which has no content "
+                        "hash (numbers, strings, tuples, lists, dicts, ranges, dataclasses and "
+                        "NumPy arrays have)")
+
+
+def key_of(fn, args: tuple, kwargs: dict) -> str:
+    """The entry's key (module docstring)."""
+    h = hashlib.sha256()
+    h.update(f"{fn.__module__}.{fn.__qualname__};{code_hash()};".encode())
+    for var in _THREAD_VARS:
+        h.update(f"{var}={os.environ.get(var, '')};".encode())
+    _feed(h, tuple(args), "argument")
+    _feed(h, dict(kwargs), "keyword")
+    return h.hexdigest()
+
+
+def _safe(folder: Path) -> bool:
+    """The folder exists (made 0700 if not), is ours, and only we can write to it."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True, mode=0o700)
+        st = folder.stat()
+    except OSError:
+        return False
+    return st.st_uid == os.getuid() and not st.st_mode & (stat.S_IWGRP | stat.S_IWOTH)
+
+
+def _load(entry: Path):
+    """(True, value) for a whole entry, (False, None) for none; a corrupt one is reported."""
+    try:
+        payload = entry.read_bytes()
+        digest = entry.with_suffix(".sha256").read_text().strip()
+    except FileNotFoundError:
+        return False, None
+    if hashlib.sha256(payload).hexdigest() != digest:
+        warnings.warn(f"cache entry {entry.name} does not match its checksum: recomputed",
+                      RuntimeWarning, stacklevel=3)
+        STATS["repaired"] += 1
+        return False, None
+    return True, pickle.loads(payload)
+
+
+def _store(entry: Path, value) -> None:
+    payload = pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL)
+    for suffix, data in ((".sha256", hashlib.sha256(payload).hexdigest().encode()),
+                         (".pkl", payload)):           # the checksum first: a reader that
+        fd, tmp = tempfile.mkstemp(dir=entry.parent)   # sees the payload sees its checksum
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.replace(tmp, entry.with_suffix(suffix))
+
+
+def memoize(fn=None, *, ignore=()):
+    """Decorator: ``fn``'s result is read from the cache when an entry for the same code and
+    arguments is there, else computed and stored (module docstring). ``ignore``: keyword
+    arguments that cannot change the result (a progress ``log``), left out of the key.
+    ``fn.uncached`` is the function itself."""
+    if fn is None:
+        return functools.partial(memoize, ignore=tuple(ignore))
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        folder = cache_dir()
+        if folder is None:
+            return fn(*args, **kwargs)
+        try:
+            key = key_of(fn, args, {k: v for k, v in kwargs.items() if k not in ignore})
+        except TypeError:              # an argument without a content hash: not cached,
+            STATS["unkeyed"] += 1      # and fn itself says what it thinks of the argument
+            return fn(*args, **kwargs)
+        entry = folder / f"{fn.__name__}-{key[:32]}.pkl"
+        if not _safe(folder):
+            STATS["unusable"] += 1
+            warnings.warn(f"the study cache {folder} is not a folder of this user's that only "
+                          "they can write: not used (set ANNSLAM_CACHE)", RuntimeWarning,
+                          stacklevel=2)
+            return fn(*args, **kwargs)
+        if entry.with_suffix(".sha256").exists():
+            found, value = _load(entry)
+            if found:
+                STATS["hits"] += 1
+                return value
+        value = fn(*args, **kwargs)
+        STATS["misses"] += 1
+        try:
+            _store(entry, value)
+        except OSError as e:           # a full or read-only disk: the result still stands
+            STATS["unusable"] += 1
+            warnings.warn(f"could not write the study cache entry {entry}: {e}", RuntimeWarning,
+                          stacklevel=2)
+        return value
+
+    wrapper.uncached = fn
+    return wrapper
+
+
+def clear() -> int:
+    """Remove every entry; return how many."""
+    folder = cache_dir()
+    if folder is None or not folder.is_dir():
+        return 0
+    n = 0
+    for p in folder.glob("*.pkl"):
+        p.unlink(missing_ok=True)
+        p.with_suffix(".sha256").unlink(missing_ok=True)
+        n += 1
+    return n
