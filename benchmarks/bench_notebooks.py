@@ -127,6 +127,8 @@ def main(argv=None) -> int:
     p.add_argument("--repeat", type=int, default=1, help="runs per notebook and version (median)")
     p.add_argument("--only", nargs="*", default=[], help="notebook number prefixes, e.g. 05 08")
     p.add_argument("--json", type=Path, help="also write the figures to this file")
+    p.add_argument("--markdown", action="store_true",
+                   help="end with the README's table of waiting times (Markdown)")
     p.add_argument("--warm", action="store_true",
                    help="also Run All a second time with the study cache the first run filled")
     args = p.parse_args(argv)
@@ -163,6 +165,8 @@ def main(argv=None) -> int:
                             str(tmp / "base")], check=False)
         shutil.rmtree(tmp, ignore_errors=True)
     _print_summary(results)
+    if args.markdown:
+        print("\n" + markdown_table(results))
     if args.json:
         args.json.write_text(json.dumps(results, indent=1))
     return 0
@@ -184,6 +188,25 @@ def _print_row(key: str, r: dict) -> None:
         flag = "" if w["step"] <= STEP_TARGET else "  > target"
         print(f"{'':34s}   widget Out[{w['cell']}] '{w['control']}' step "
               f"{w['step']:.3f} s{ratio}{flag}", flush=True)
+
+
+def markdown_table(results: dict) -> str:
+    """The README's table: per notebook, CPU seconds of Run All (instructor / student), cold
+    and with the study cache filled, and the slowest widget step."""
+    rows = ["| notebook | Run All, CPU s (instructor / student) | again, study cache filled | "
+            "widget step, s |", "|---|---|---|---|"]
+    stems = list(dict.fromkeys(k.rsplit(" ", 1)[0] for k in results))
+    for stem in stems:
+        ins, stu = results.get(f"{stem} instructor", {}), results.get(f"{stem} student", {})
+
+        def pair(kind):
+            vals = [r[kind]["cpu"] for r in (ins, stu) if kind in r]
+            return " / ".join(f"{v:.1f}" for v in vals) if vals else "not measured"
+        steps = [w["step"] for r in (ins, stu) if "now" in r for w in r["now"]["widgets"]]
+        rows.append(f"| {stem[:2]} | {pair('now')} | {pair('warm')} | "
+                    f"{max(steps):.2f} |" if steps else
+                    f"| {stem[:2]} | {pair('now')} | {pair('warm')} | no widget |")
+    return "\n".join(rows)
 
 
 def _print_summary(results: dict) -> None:

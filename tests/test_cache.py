@@ -133,3 +133,15 @@ def test_clear_removes_every_entry(cache):
     _square_sum([7.0])
     assert _cache.clear() == 2
     assert not list(cache.iterdir())
+
+
+def test_the_command_line_says_where_and_clears(cache, capsys):
+    from annslam_lib.course import cli
+
+    _square_sum([8.0])
+    assert cli.main(["cache", "where"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"{cache}: 1 entries, ")
+    assert cli.main(["cache", "clear"]) == 0
+    assert capsys.readouterr().out == f"removed 1 entries from {cache}\n"
+    assert not list(cache.glob("*.pkl"))

@@ -87,6 +87,32 @@ def _add_errata(sub) -> None:
     p.set_defaults(func=_errata)
 
 
+def _cache(args: argparse.Namespace) -> int:
+    from .. import _cache as cache
+
+    folder = cache.cache_dir()
+    if folder is None:
+        print("the study cache is off (ANNSLAM_CACHE=off)")
+        return 0
+    if args.action == "clear":
+        print(f"removed {cache.clear()} entries from {folder}")
+        return 0
+    entries = sorted(folder.glob("*.pkl")) if folder.is_dir() else []
+    size = sum(p.stat().st_size for p in entries)
+    print(f"{folder}: {len(entries)} entries, {size / 1e6:.1f} MB")
+    return 0
+
+
+def _add_cache(sub) -> None:
+    p = sub.add_parser("cache", help="where the study cache is and how large; clear it",
+                       description="Heavy studies of the notebooks are computed once per "
+                       "machine and kept here (ANNSLAM_CACHE, else the per-user cache; "
+                       "ANNSLAM_CACHE=off turns it off). An entry is used only for the same "
+                       "library code and arguments.")
+    p.add_argument("action", choices=["where", "clear"])
+    p.set_defaults(func=_cache)
+
+
 def _reproduce(args: argparse.Namespace) -> int:
     from ..paper.report import reproduce
 
@@ -393,6 +419,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="command")
     _add_data(sub)
     _add_errata(sub)
+    _add_cache(sub)
     _add_reproduce(sub)
     _add_release(sub)
     _add_grade(sub)
