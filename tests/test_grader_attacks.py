@@ -294,10 +294,12 @@ def test_the_sandbox_hides_the_instructor_notebook_and_has_no_network(instructor
              f"s = socket.socket()\n"
              f"try:\n    s.connect(('127.0.0.1', {port}))\n    NET = True\n"
              f"except OSError:\n    NET = False\n"
-             f"assert not NET, 'network reachable'\n" + gs.OBSERVE_BODY)
+             f"assert not NET, 'network reachable'\n"
+             f"import os\nassert os.environ.get('ANNSLAM_CACHE') == 'off', 'study cache on'\n"
+             + gs.OBSERVE_BODY)
     g = grade(gs.submission(probe, gs.SPEED_BODY), instructor, tmp_path, isolation="bwrap")
     server.close()
-    assert g.score == FULL, g.report()         # both asserts held inside the sandbox
+    assert g.score == FULL, g.report()         # the asserts held inside the sandbox
 
 
 # ------------------------------------------------------------------ shortcuts

@@ -289,7 +289,8 @@ class Sandbox:
                    PYTHONPATH=str(self.root / "lib"), MPLCONFIGDIR=str(self.home / ".mpl"),
                    IPYTHONDIR=str(self.home / ".ipython"), JUPYTER_RUNTIME_DIR=str(self.ipc),
                    PYTHONDONTWRITEBYTECODE="1", OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1",
-                   MKL_NUM_THREADS="1", PYTHONHASHSEED="0", MPLBACKEND="agg")
+                   MKL_NUM_THREADS="1", PYTHONHASHSEED="0", MPLBACKEND="agg",
+                   ANNSLAM_CACHE="off")       # a grade is computed, never read from a pickle
         return env
 
     def start(self) -> None:
