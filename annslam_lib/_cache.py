@@ -12,8 +12,8 @@ trained networks). A call's key is the SHA-256 of
   ``MKL_NUM_THREADS``): another thread count may change a result at rounding level,
 - its arguments by content: numbers, strings, ``None``, tuples, lists, dicts, ranges,
   dataclasses field by field and NumPy arrays by dtype, shape and bytes (a dataset passed
-  in is hashed whole). Anything else is refused with a TypeError: a key must never be a
-  guess.
+  in is hashed whole). A call with any other argument is computed and not stored
+  (counted in :data:`STATS`): a key must never be a guess.
 
 The entry is a pickle with its own SHA-256 beside it; an entry whose bytes do not match (a
 torn or edited file) is recomputed and rewritten, with a warning, and counted in
@@ -180,11 +180,10 @@ def memoize(fn=None, *, ignore=()):
                           "they can write: not used (set ANNSLAM_CACHE)", RuntimeWarning,
                           stacklevel=2)
             return fn(*args, **kwargs)
-        if entry.with_suffix(".sha256").exists():
-            found, value = _load(entry)
-            if found:
-                STATS["hits"] += 1
-                return value
+        found, value = _load(entry)
+        if found:
+            STATS["hits"] += 1
+            return value
         value = fn(*args, **kwargs)
         STATS["misses"] += 1
         try:

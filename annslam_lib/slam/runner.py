@@ -57,16 +57,6 @@ from .threads import one_blas_thread
 __all__ = ["run", "run_cached"]
 
 
-
-@memoize
-def run_cached(dataset, config: SlamConfig | None = None, *,
-               backend: str = "efficient") -> SlamResult:
-    """:func:`run` (no progress bar, no landmark model), computed once per machine and then
-    read back from the study cache (``annslam_lib._cache``): for the long runs a notebook
-    compares, whose running time is not the lesson. ``result.runtime`` is the time of the
-    run that computed it."""
-    return run(dataset, config, progress=False, backend=backend)
-
 def _resolve_dataset(dataset) -> Dataset:
     if isinstance(dataset, str):
         from ..data import loaders as datasets
@@ -159,6 +149,15 @@ def run(dataset, config: SlamConfig | None = None, *, progress=None,
     with one_blas_thread():
         return _run(dataset, config, progress, backend, landmark_model)
 
+
+@memoize
+def run_cached(dataset, config: SlamConfig | None = None, *,
+               backend: str = "efficient") -> SlamResult:
+    """:func:`run` (no progress bar, no landmark model), computed once per machine and then
+    read back from the study cache (``annslam_lib._cache``): for the long runs a notebook
+    compares, whose running time is not the lesson. ``result.runtime`` is the time of the
+    run that computed it."""
+    return run(dataset, config, progress=False, backend=backend)
 
 
 def _landmark_model(cfg: SlamConfig, model):
