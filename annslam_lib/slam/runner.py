@@ -125,14 +125,16 @@ def _progress(progress, total):
 
 
 def run(dataset, config: SlamConfig | None = None, *, progress=None,
-        backend: str = "efficient", landmark_model=None) -> SlamResult:
+        backend: str = "efficient", landmark_model=None, inspect=None) -> SlamResult:
     """Run EKF-SLAM over a whole dataset (notebook 05; notebook 06 for Victoria Park).
 
     dataset: a ``records.Dataset`` (loaded or simulated) or 'car_park' / 'victoria_park'.
     config: :class:`SlamConfig`; None -> ``SlamConfig.for_dataset(dataset.name)`` for a
     known name, else ``SlamConfig()``. progress: tqdm bar; None = only for long runs
     with a terminal. backend: 'efficient' (:class:`EkfSlam`) or 'dense' (the textbook
-    reference ``slam.dense.DenseEkfSlam``; slow, for checks).
+    reference ``slam.dense.DenseEkfSlam``; slow, for checks). inspect: None, or a function
+    called with the filter once it is built, before any step (an analysis may wrap its
+    methods to record what they see, e.g. ``evaluation.real_consistency``).
 
     Events are processed in time order from the first odometry sample on (earlier scans
     and fixes are skipped and counted); the filter predicts to every event's time with
@@ -147,7 +149,7 @@ def run(dataset, config: SlamConfig | None = None, *, progress=None,
     (module docstring). The log keeps the raw detections.
     """
     with one_blas_thread():
-        return _run(dataset, config, progress, backend, landmark_model)
+        return _run(dataset, config, progress, backend, landmark_model, inspect)
 
 
 @memoize
@@ -331,7 +333,7 @@ class _ScanStep:
         return result
 
 
-def _run(dataset, config, progress, backend, landmark_model=None) -> SlamResult:
+def _run(dataset, config, progress, backend, landmark_model=None, inspect=None) -> SlamResult:
     t_start = time.perf_counter()
     ds, screening = screen(_resolve_dataset(dataset))     # damaged streams: repaired, counted
     if config is None:
@@ -355,6 +357,8 @@ def _run(dataset, config, progress, backend, landmark_model=None) -> SlamResult:
     pose0, init_info = _initial(ds, cfg)
     P0 = np.diag([cfg.initial_sigma_xy**2, cfg.initial_sigma_xy**2, cfg.initial_sigma_phi**2])
     filt = make(pose0, P0, ds.vehicle, cfg.motion_model)
+    if inspect is not None:
+        inspect(filt)
     controls = control_table(odo, ds.vehicle, cfg.sigma_speed, cfg.sigma_steer)
     lmodel = _landmark_model(cfg, landmark_model)
     sr, sb = cfg.sigma_range, cfg.sigma_bearing
