@@ -109,7 +109,9 @@ class SimConfig:
     Laser noise (Car Park program) and systematic error
         sigma_range 0.1 m, sigma_bearing 1 degree;
         range_meas = range_scale * r + range_bias + noise,
-        bearing_meas = wrap(beta + bearing_offset + noise).
+        bearing_meas = wrap(beta + bearing_offset + noise). The raw laser's beams see
+        each pole at beta + bearing_offset too (a laser mounted turned by it), and
+        range_scale and range_bias apply to its ranges.
         max_range (30 m, the Car Park extractor's limit) bounds detections and
         raw beacon returns; min_range (1 m) bounds detections.
     GPS
@@ -418,7 +420,7 @@ def _raw_laser(t, z, noise, cfg: SimConfig) -> Laser:
     n_scans, n_beams = t.size, LASER_ANGLES.size
     step = LASER_ANGLES[1] - LASER_ANGLES[0]
     rho = cfg.pole_radius
-    r, beta = z[..., 0].ravel(), z[..., 1].ravel()
+    r, beta = z[..., 0].ravel(), z[..., 1].ravel() + cfg.bearing_offset   # a turned laser
     beta = np.where(beta < -np.pi / 2, beta + 2 * np.pi, beta)   # beams span 0..pi
     half = np.arcsin(np.minimum(rho / r, 1.0))
     lo = np.maximum(np.ceil((beta - half) / step) - 1, 0).astype(np.int64)

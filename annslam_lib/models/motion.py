@@ -194,12 +194,15 @@ def predict_exact(pose, control, dt, vehicle: Vehicle) -> np.ndarray:
     return out
 
 
-def control_table(odometry, vehicle: Vehicle, sigma_speed: float, sigma_steer: float) -> list:
+def control_table(odometry, vehicle: Vehicle, sigma_speed: float, sigma_steer: float,
+                  steer_gain: float = 0.0) -> list:
     """Per odometry sample k, the tuple (v_c, alpha, tan alpha, w, dw/dalpha, q00, q01, q11,
     Delta_k) the predictions use: axle speed (``motion.axle_speed``), yaw rate
     w = v_c tan(alpha) / L and its steering derivative, the control covariance Q_c
-    (see the module docstring) and the nominal length Delta_k = t_{k+1} - t_k of the
-    interval the sample is held over (the last sample: the median interval).
+    (see the module docstring; the steering standard deviation is
+    sigma_steer + steer_gain |alpha_k|, ``SlamConfig.steer_noise_gain``) and the nominal
+    length Delta_k = t_{k+1} - t_k of the interval the sample is held over (the last
+    sample: the median interval).
 
     Precomputed once, vectorised: the scalar per-step code then only needs cos/sin(phi).
     """
@@ -209,10 +212,11 @@ def control_table(odometry, vehicle: Vehicle, sigma_speed: float, sigma_steer: f
     ta = np.tan(alpha)
     w = v_c * ta / vehicle.L
     dw = v_c * (1.0 + ta * ta) / vehicle.L
-    sv2, sa2 = sigma_speed**2, sigma_steer**2
+    sv2 = sigma_speed**2
+    sa2 = np.broadcast_to((sigma_steer + steer_gain * np.abs(alpha)) ** 2, v_c.shape)
     q00 = J[:, 0] ** 2 * sv2 + J[:, 1] ** 2 * sa2
     q01 = J[:, 1] * sa2
-    q11 = np.full(v_c.shape, sa2)
+    q11 = sa2
     dt = np.diff(odometry.t)
     last = float(np.median(dt)) if dt.size else 0.0
     span = np.append(dt, last)

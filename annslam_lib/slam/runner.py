@@ -35,6 +35,7 @@ notebook 08, ``annslam_lib.ann``)
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import sys
 import time
@@ -348,6 +349,9 @@ def _run(dataset, config, progress, backend, landmark_model=None, inspect=None) 
     else:
         raise ValueError(f"backend must be 'efficient' or 'dense', got {backend!r}")
     det = _detections(ds, cfg.feature_source)
+    if cfg.range_bias or cfg.bearing_offset:    # a calibration of the laser (SlamConfig)
+        det = dataclasses.replace(det, range=det.range - cfg.range_bias,
+                                  bearing=det.bearing - cfg.bearing_offset)
     if cfg.association == "truth" and np.any(det.landmark_id < 0):
         raise ValueError("SlamConfig.association = 'truth' needs detections with true "
                          "landmark ids (a simulated dataset)")
@@ -359,7 +363,7 @@ def _run(dataset, config, progress, backend, landmark_model=None, inspect=None) 
     filt = make(pose0, P0, ds.vehicle, cfg.motion_model)
     if inspect is not None:
         inspect(filt)
-    controls = control_table(odo, ds.vehicle, cfg.sigma_speed, cfg.sigma_steer)
+    controls = control_table(odo, ds.vehicle, cfg.sigma_speed, cfg.sigma_steer, cfg.steer_noise_gain)
     lmodel = _landmark_model(cfg, landmark_model)
     sr, sb = cfg.sigma_range, cfg.sigma_bearing
     if lmodel is not None:                     # the model's pseudo-measurement noise R'
