@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _checks
+from .._cache import memoize as _memoize
 from .consistency import MapConsistency, map_consistency
 
 __all__ = ["survey_nees", "InnovationSplit", "innovation_split"]
@@ -93,11 +94,13 @@ class InnovationSplit:
         return out
 
 
+@_memoize
 def innovation_split(dataset, config=None, *, turning_steer: float = 0.05) -> InnovationSplit:
     """Run the filter (``slam.runner.run`` with ``config``) on ``dataset`` and record, at
     every laser and GPS update, each observation's innovation and the diagonals of
     H P H^T and R, before the update; ``turning`` where the odometry's |steering| exceeds
-    ``turning_steer`` rad. The run itself is unchanged. Notebook 05."""
+    ``turning_steer`` rad. The run itself is unchanged. Notebooks 05 and 06; computed once per
+machine (``annslam_lib._cache``)."""
     from ..data.records import Dataset
     from ..slam.runner import run
 
