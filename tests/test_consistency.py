@@ -25,8 +25,8 @@ def test_independent_scans_give_the_textbook_null():
     share of K scans inside a 95 % band is Binomial(K, 0.95) / K, the ANEES band that of
     chi2(3 N K) / (N K). Checked against scipy, not against the module."""
     rng = np.random.default_rng(5)
-    runs, K = 50, 300
-    nt = scan_null.null_test(rng.chisquare(3, (runs, K)), n_sim=2000, seed=1)
+    runs, K = 50, 200
+    nt = scan_null.null_test(rng.chisquare(3, (runs, K)), n_sim=1000, seed=1)
     assert nt.acf.size - 1 == K // 4
     expected = binom.ppf(0.05, K, 0.95) / K
     assert abs(nt.share_threshold - expected) <= 2 / K
@@ -48,9 +48,9 @@ def test_correlated_paths_have_the_asked_correlation():
 
 
 @pytest.fixture(scope="module")
-def loop_8():
-    """The default filter, 50 runs of 8 laps of the loop (2224 scans each)."""
-    mc = consistency.monte_carlo(range(7100, 7100 + N_RUNS), "midpoint", "loop", 8)
+def loop_4():
+    """The default filter, 50 runs of 4 laps of the loop (1121 scans each)."""
+    mc = consistency.monte_carlo(range(7100, 7100 + N_RUNS), "midpoint", "loop", 4)
     return mc, scan_null.null_test(mc.nees_runs)
 
 
@@ -65,8 +65,8 @@ def test_the_null_model_reproduces_the_runs_correlation():
     assert nt.share_threshold < binom.ppf(0.05, nt.scans, 0.95) / nt.scans - 0.03
 
 
-def test_the_default_filter_passes_and_a_10_percent_overconfident_one_fails(loop_8):
-    mc, nt = loop_8
+def test_the_default_filter_passes_and_a_10_percent_overconfident_one_fails(loop_4):
+    mc, nt = loop_4
     assert SlamConfig().motion_model == "midpoint"
     assert set(mc.mapped) == {15}
     lo, hi = chi2.ppf([0.025, 0.975], 3 * N_RUNS) / N_RUNS
