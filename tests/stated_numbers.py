@@ -11,6 +11,13 @@ section that sums the chapter up (its title, the summary, the verdict) may cite 
 of the notebook. Not stated results, and skipped: heading lines, exercise and section
 numbers (``Exercise 5.2``, ``(4.4)`` when ``4.4`` heads a section), years (1950-2030).
 Everything else is either evidenced or declared in ``stated_numbers.toml`` with a reason.
+Comments in code are no evidence.
+
+Limits (measured by a review): a stated number that equals some other printed number of its
+section passes (about a third of random one-decimal numbers would, in a section as full of
+output as notebook 05's); a declaration covers every occurrence of its number in the
+notebook. The test catches a number that drifted to a value printed nowhere nearby, which
+is what the audit found.
 """
 from __future__ import annotations
 
@@ -22,7 +29,7 @@ import nbformat
 
 MATH = re.compile(r"\$\$.*?\$\$|\$[^$\n]*\$|`[^`\n]*`|<[^>\n]*>|\]\([^)\n]*\)", re.S)
 # a number not glued to a word, a path or a longer number; ``N of M`` counts as two
-STATED = re.compile(r"(?<![\w.^_{\\/#-])(\d{1,3}(?:[,\u202f ]\d{3})+(?![\d.])|\d+(?:\.\d+)?)(?:\s?(%|cm|mm|ms|°))?(?![\w]|\.\d)")
+STATED = re.compile(r"(?<![\w.^_{\\/#])(?<![A-Za-z]-)(\d{1,3}(?:[,\u202f ]\d{3})+(?![\d.])|\d+(?:\.\d+)?)(?:\s?(%|cm|mm|ms|°))?(?![\w]|\.\d)")
 PRINTED = re.compile(r"(?<![A-Za-wyz_\d.])[-+−]?(\d+(?:\.\d+)?(?:e[-+]?\d+)?)")
 EXERCISE = re.compile(r"(?:exercise|exercises|section|sections|chapter|chapters|ch\.)\s*$", re.I)
 APPROX = re.compile(r"(?:about|around|roughly|nearly|almost|some|~|≈)\s*$", re.I)
@@ -96,7 +103,7 @@ def stated_numbers(nb) -> list[Stated]:
                     continue
                 if number in sections and "." in number and not unit:
                     continue
-                if re.fullmatch(r"(19[5-9]\d|20[0-2]\d|2030)", number) and not unit:
+                if re.fullmatch(r"(19[5-9]\d|20[0-2]\d|2030)", m.group(1)) and not unit:
                     continue
                 small_int = "." not in number and len(number) < 3
                 count = re.match(r"\s*of\s+\d", line[m.end():]) or re.search(r"\d\s+of\s+$", before)
@@ -126,7 +133,8 @@ def evidence(nb) -> dict[int, set[str]]:
             cells_of[i] = spans
         else:
             # the code's own literals: a parameter the prose names is set here
-            per_section[-1] |= printed_numbers(cell.source)
+            code = "\n".join(line.split("#")[0] for line in cell.source.splitlines())
+            per_section[-1] |= printed_numbers(code)          # comments are no evidence
             if _ignored(cell):
                 continue                     # timings: they differ on every run
             for o in cell.get("outputs", []):

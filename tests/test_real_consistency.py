@@ -91,7 +91,8 @@ def test_a_consistent_filter_has_the_innovation_variance_it_predicts(simulated):
     rows = {(s, c, w): row for s, c, w, *row in split.rows()}
     n_straight, n_turn = rows["laser", "range", "straight"][0], rows["laser", "range", "turning"][0]
     assert n_straight + n_turn == rows["laser", "range", "all"][0] == laser.sum()
-    assert 0 < rows["laser", "range", "all"][-2] < 1                   # R's share of S
+    r_share = rows["laser", "range", "all"][-2]
+    assert r_share == pytest.approx(split.r[laser, 0].mean() / (split.hph[laser, 0] + split.r[laser, 0]).mean())
 
 
 def test_innovation_split_refuses_what_is_not_a_dataset():
@@ -104,3 +105,29 @@ def test_a_laser_noisier_than_the_filter_thinks_shows_in_its_component():
     split = real_consistency.innovation_split(ds, SlamConfig.for_dataset("simulated"))
     ratio = (split.nu ** 2).mean(axis=0) / (split.hph + split.r).mean(axis=0)
     assert ratio[0] > 1.3 and ratio[1] == pytest.approx(0.95, abs=0.1)
+
+
+def test_gps_rows_hold_the_covariance_before_the_update():
+    """The filter updates P in place: the split must record the prior H P H^T of a fix."""
+    ds = simulate.simulate(seed=11, raw_laser=False)
+    cfg = SlamConfig.for_dataset("simulated", gps_mode="init", gps_init_seconds=10.0)
+    split = real_consistency.innovation_split(ds, cfg)
+    priors = []
+
+    def snapshot(filt):
+        gps_update = filt.gps_update
+
+        def gps(xy, sigma, gate=float("inf")):
+            filt.flush()
+            before = np.diag(filt.state()[1][:2, :2]).copy()
+            out = gps_update(xy, sigma, gate)
+            if out[1]:
+                priors.append(before)
+            return out
+        filt.gps_update = gps
+
+    runner.run(ds, cfg, progress=False, inspect=snapshot)
+    gps = split.sensor == "gps"
+    assert gps.sum() == len(priors) > 20
+    np.testing.assert_allclose(split.hph[gps], np.array(priors), rtol=1e-12)
+    assert np.all(split.hph[gps] > 0)

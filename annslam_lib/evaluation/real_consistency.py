@@ -127,14 +127,14 @@ machine (``annslam_lib._cache``)."""
 
         def gps(xy, sigma, gate=math.inf):
             filt.flush()
-            x, P = filt.state()
+            x, P = filt.state()                           # the filter's own arrays: copy
             nu = np.asarray(xy, dtype=float) - x[:2]
             Rd = np.full(2, sigma**2)
-            S = P[:2, :2] + np.diag(Rd)
+            prior = P[:2, :2].copy()                      # before the update changes P in place
+            S = prior + np.diag(Rd)
             out = gps_update(xy, sigma, gate)
             if out[1]:                                    # accepted fixes only
-                rows.append(("gps", nu, np.diag(P[:2, :2]).copy(), Rd,
-                             float(nu @ np.linalg.solve(S, nu))))
+                rows.append(("gps", nu, np.diag(prior), Rd, float(nu @ np.linalg.solve(S, nu))))
             return out
 
         filt.update, filt.gps_update = laser, gps

@@ -51,8 +51,8 @@ class SlamConfig:
         is larger than the filter's own uncertainty there: over 50 seeds its average pose
         NEES leaves the per-scan band on more than a third of the scans and its final map
         NEES per dof is 1.2 (band 0.93-1.07); the midpoint model passes the per-scan rules
-        on the loop, with a map NEES per dof at the band's upper edge (1.07), and is about
-        10 % over-confident on the hairpin (notebook 05, ``tests/test_consistency.py``).
+        on the loop, with a map NEES per dof at the band's upper edge (1.07), and its map is
+        about 9 % over-confident on the hairpin (notebook 05, ``tests/test_consistency.py``).
     Observations
         sigma_range: range noise, m (ACFR: 0.1). sigma_bearing: bearing noise, rad (1 deg).
         range_bias (m), bearing_offset (rad): a calibration subtracted from every laser

@@ -147,7 +147,8 @@ def run(dataset, config: SlamConfig | None = None, *, progress=None,
     landmark_model: with ``config.landmark_model = 'ann'``, the trained model
     (``ann.TrainedModel``, ``ann.InverseModel`` or anything with ``pseudo_measurement(pose,
     z, intensity, width)`` and ``sigmas``): its pseudo-measurements replace the detections
-    (module docstring). The log keeps the raw detections.
+    (module docstring). The log keeps the detections, not the pseudo-measurements (after the
+    configuration's calibration, ``SlamConfig.range_bias`` and ``bearing_offset``, if any).
     """
     with one_blas_thread():
         return _run(dataset, config, progress, backend, landmark_model, inspect)
