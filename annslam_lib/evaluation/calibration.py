@@ -23,12 +23,11 @@ them: chapter 05 says so where it uses them.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from .. import _checks
-from dataclasses import dataclass
-
 from ..data.records import Dataset, Gps
 
 __all__ = ["gps_sigma_from_scatter", "LaserCalibration", "laser_calibration"]

@@ -20,6 +20,8 @@ import numpy as np
 
 from .. import _checks
 from .._cache import memoize as _memoize
+from ..models.geometry import wrap_angle
+from ..models.uncertainty import mahalanobis2
 from .consistency import MapConsistency, map_consistency
 
 __all__ = ["survey_nees", "InnovationSplit", "innovation_split"]
@@ -50,9 +52,7 @@ def survey_nees(result, surveyed, mapped_index, surveyed_index, *,
     idx = np.ravel(np.c_[3 + 2 * i, 4 + 2 * i])
     C = P[np.ix_(idx, idx)] + sigma**2 * np.eye(idx.size)
     e = (np.asarray(result.landmarks, dtype=float)[i] - surveyed[j]).ravel()
-    L = np.linalg.cholesky(0.5 * (C + C.T))
-    w = np.linalg.solve(L, e)
-    return map_consistency([float(w @ w)], [e.size])
+    return map_consistency([float(mahalanobis2(e[None], np.zeros(e.size), C)[0])], [e.size])
 
 
 @dataclass(frozen=True)
@@ -116,13 +116,12 @@ machine (``annslam_lib._cache``)."""
             zhat, S = filt.observation_model(sr, sb)
             lm_idx = np.asarray(lm, dtype=np.int64).ravel()
             z = np.asarray(z, dtype=float)
-            nu = np.c_[z[:, 0] - zhat[lm_idx, 0],
-                       (z[:, 1] - zhat[lm_idx, 1] + math.pi) % (2 * math.pi) - math.pi]
+            nu = np.c_[z[:, 0] - zhat[lm_idx, 0], wrap_angle(z[:, 1] - zhat[lm_idx, 1])]
             Rd = np.array([sr**2, sb**2])
-            for k, j in enumerate(lm_idx):
-                Sj = S[j]
-                rows.append(("laser", nu[k], np.diag(Sj) - Rd, Rd,
-                             float(nu[k] @ np.linalg.solve(Sj, nu[k]))))
+            Sk = S[lm_idx]
+            nis = np.einsum("ki,ki->k", nu, np.linalg.solve(Sk, nu[..., None])[..., 0])
+            rows.extend(("laser", nu[k], np.diagonal(Sk[k]) - Rd, Rd, float(nis[k]))
+                        for k in range(lm_idx.size))
             return update(z, lm, sr, sb)
 
         def gps(xy, sigma, gate=math.inf):
