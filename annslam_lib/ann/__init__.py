@@ -73,7 +73,7 @@ from .._lazy import attach
 _WHERE = {
     "samples": ["FEATURE_NAMES", "MEASUREMENT_FEATURES", "USED_STATUS", "SPLITS",
                      "TrainingSet", "encode", "training_set", "Split", "chronological_split",
-                     "beacon_folds"],
+                     "beacon_folds", "time_fold_edges", "time_folds", "beacon_holdout_sizes"],
     "network": ["ALGORITHMS", "TrainConfig", "TrainedModel", "InverseModel", "train",
                 "with_features", "forward", "train_loop", "mapminmax", "mapminmax_reverse",
                 "one_torch_thread"],

@@ -13,7 +13,8 @@ from ..models.observation import inverse_observe_values
 from ..slam.results import STATUS
 
 __all__ = ["FEATURE_NAMES", "MEASUREMENT_FEATURES", "USED_STATUS", "SPLITS", "TrainingSet",
-           "encode", "training_set", "Split", "chronological_split", "beacon_folds"]
+           "encode", "training_set", "Split", "chronological_split", "beacon_folds",
+           "time_fold_edges", "time_folds", "beacon_holdout_sizes"]
 
 #: Columns of ``TrainingSet.X`` (module docstring).
 FEATURE_NAMES = ("pose_x", "pose_y", "sin_phi", "cos_phi", "range", "bearing", "sin_ray",
@@ -227,3 +228,63 @@ def beacon_folds(ts: TrainingSet, n_folds: int = 5, seed: int = 0) -> list[Split
         train_ = np.flatnonzero(~np.isin(ts.beacon, np.concatenate([test_b, val_b])))
         folds.append(Split(train_, val, test, name=f"beacons fold {k}: test {sorted(test_b.tolist())}"))
     return folds
+
+
+
+def time_fold_edges(ts: TrainingSet, n_folds: int = 5) -> np.ndarray:
+    """Edges (n_folds + 1,) of ``n_folds`` contiguous time windows holding equal numbers
+    of samples: quantiles of the samples' scan times, s (blocked cross-validation over
+    time, notebook 08 section 4)."""
+    if isinstance(n_folds, bool) or not isinstance(n_folds, numbers.Integral) or n_folds < 2:
+        raise ValueError(f"n_folds must be an integer >= 2, got {n_folds!r}")
+    if np.unique(ts.t).size < 2 * n_folds:
+        raise ValueError(f"{np.unique(ts.t).size} scans cannot make {n_folds} time folds")
+    return np.quantile(ts.t, np.linspace(0.0, 1.0, n_folds + 1))
+
+
+
+def time_folds(ts: TrainingSet, n_folds: int = 5, *, gap: float = 2.0,
+               val_fraction: float = 0.15, seed: int = 0) -> list[Split]:
+    """Blocked cross-validation over time. Fold k tests on the samples inside window k
+    (:func:`time_fold_edges`); it trains and stops early on the samples more than ``gap``
+    seconds outside the window (consecutive scans see the same beacons from nearly the same
+    pose: the gap keeps the window's neighbours out of training), the validation part a
+    random ``val_fraction`` of those (generator seeded with 100 k + ``seed``).
+
+    The window's beacons are NOT held out: on a run where every beacon is seen again and
+    again, holding them out leaves too few samples (:func:`beacon_holdout_sizes`). So
+    these folds test generalisation over TIME (new poses, new sightings of known
+    beacons); :func:`beacon_folds` tests it over beacons."""
+    edges = time_fold_edges(ts, n_folds)
+    gap = float(gap)
+    if not math.isfinite(gap) or gap < 0:
+        raise ValueError(f"gap must be a finite number of seconds >= 0, got {gap!r}")
+    vf = float(val_fraction)
+    if not 0.0 < vf < 1.0:
+        raise ValueError(f"val_fraction must lie in (0, 1), got {val_fraction!r}")
+    folds = []
+    for k in range(n_folds):
+        lo, hi = edges[k], edges[k + 1]
+        inside = (ts.t >= lo) & (ts.t <= hi) if k == n_folds - 1 else (ts.t >= lo) & (ts.t < hi)
+        outside = np.flatnonzero((ts.t < lo - gap) | (ts.t > hi + gap))
+        perm = np.random.default_rng(100 * k + int(seed)).permutation(outside)
+        n_val = int(round(vf * perm.size))
+        folds.append(Split(np.sort(perm[n_val:]), np.sort(perm[:n_val]), np.flatnonzero(inside),
+                           name=f"time fold {k}: {lo:.1f}-{hi:.1f} s"))
+    return folds
+
+
+
+def beacon_holdout_sizes(ts: TrainingSet, n_folds: int = 5, *, gap: float = 2.0) -> np.ndarray:
+    """Per time fold, how many samples would remain for training and validation if the
+    beacons seen inside the window were held out as well (outside the window +- ``gap``,
+    of beacons never seen inside it): what makes that design infeasible on a small map."""
+    edges = time_fold_edges(ts, n_folds)
+    sizes = []
+    for k in range(n_folds):
+        lo, hi = edges[k], edges[k + 1]
+        inside = (ts.t >= lo) & (ts.t <= hi)
+        seen = np.unique(ts.beacon[inside])
+        keep = ((ts.t < lo - gap) | (ts.t > hi + gap)) & ~np.isin(ts.beacon, seen)
+        sizes.append(int(keep.sum()))
+    return np.array(sizes)

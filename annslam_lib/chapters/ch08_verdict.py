@@ -22,7 +22,7 @@ from ipywidgets import HTML, Image, Layout, SelectionSlider, VBox
 from matplotlib.figure import Figure
 
 from ..data.records import Dataset
-from ..paper.study import SCALES, Study, r_scale_sweep
+from ..paper.study import SCALES, FoldStudy, Study, r_scale_sweep
 from ..plots.paper import plot_pose_trace, plot_r_scale, plot_transfer
 from ..plots.slam import CAR_PARK_LIMITS, plot_true_vs_mapped
 from ..plots.style import DPI, FIG_WIDTH, figure
@@ -30,7 +30,7 @@ from ..plots.style import notebook_setup as setup
 from ..slam.config import SlamConfig
 
 __all__ = ["setup", "pose_trace_figure", "r_scale_figure", "transfer_figure", "figure5_figure",
-           "r_scale_explorer"]
+           "training_curves_figure", "r_scale_explorer"]
 
 #: Size of the explorer's image (inches at plots.style.DPI): the text column's width.
 EXPLORER_FIGSIZE = (FIG_WIDTH, 4.2)
@@ -52,6 +52,24 @@ def transfer_figure(transfers: dict):
     """Map RMSE, plain against ANN filter, for every simulated transfer (section 6)."""
     fig, ax = figure(height=3.8)
     plot_transfer(transfers, ax=ax)
+    return fig
+
+
+def training_curves_figure(fs: FoldStudy, seed_index: int = 0):
+    """The networks of the verdict over folds (section 4), training seed ``seeds[seed_index]``:
+    training (dashed) and validation MSE per epoch for every time fold (left) and beacon
+    fold (right), a dot at the epoch whose weights were kept (early stopping)."""
+    fig, axes = figure(1, 2, height=3.4, sharey=True, layout="constrained")
+    for ax, (kind, title) in zip(axes, (("time", "time folds"), ("beacons", "beacon folds"))):
+        for k, per_seed in enumerate(fs.histories[kind]):
+            h = per_seed[seed_index]
+            line, = ax.semilogy(h["val"], label=f"fold {k}")
+            ax.semilogy(h["train"], "--", color=line.get_color(), lw=0.8)
+            ax.plot(h["best_epoch"], h["val"][h["best_epoch"]], "o", color=line.get_color(), ms=4)
+        ax.set(title=f"{title} (seed {fs.seeds[seed_index]})", xlabel="epoch")
+    axes[0].set_ylabel("MSE per coordinate (m²)")
+    axes[1].legend(fontsize="small", title="validation (—), training (--)",
+                   title_fontsize="small")
     return fig
 
 
