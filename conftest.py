@@ -86,8 +86,8 @@ def pytest_configure(config):
 # `./course.sh test` runs on two pytest-xdist workers. A test module (and a notebook's cells)
 # runs on one worker, so that its module fixtures are built once and a notebook's cells run
 # in order in one kernel, as `--dist loadfile` does; except the modules in SPLIT, whose tests
-# are independent Run Alls of one chapter each (in JupyterLab; with nbclient where there is
-# no browser), which go to whichever worker is free. Work is
+# are independent Run Alls of one chapter each (the student versions with nbclient; the
+# widget notebooks in JupyterLab), which go to whichever worker is free. Work is
 # handed out longest first (HEAVY_FIRST, then the rest in collection order; inside a SPLIT
 # module the later, longer chapters first; every notebook before the short test modules),
 # so that no worker is left with a long test at
@@ -96,10 +96,13 @@ def pytest_configure(config):
 # no longer lets it do, and silently falls back to sending single tests.
 SPLIT = ("tests/test_browser_widgets_0508.py", "tests/test_browser_widgets_0104.py",
          "tests/test_student_run.py")
-HEAVY_FIRST = ("tests/test_hub.py", "tests/test_browser_widgets_0508.py",
-               "tests/test_install.py", "tests/test_grader_nbgrader.py",
-               "tests/test_browser_widgets_0104.py", "tests/test_grader_attacks.py",
+HEAVY_FIRST = ("tests/test_hub.py", "tests/test_install.py", "tests/test_grader_nbgrader.py",
+               "tests/test_grader_attacks.py",
                "notebooks/08", "notebooks/05", "notebooks/07", "notebooks/06", "notebooks/",
+               # after the instructor versions: the student versions' Run Alls and the
+               # widget notebooks read the studies those computed (one cache per session)
+               "tests/test_student_run.py", "tests/test_browser_widgets_0508.py",
+               "tests/test_browser_widgets_0104.py",
                "tests/test_consistency.py", "tests/test_browser.py",
                "tests/test_figure_regression.py", "tests/test_workspace.py")
 

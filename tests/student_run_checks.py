@@ -1,6 +1,5 @@
 """What a student's Run All must show (the README's promise), checked on an executed student
-version: by tests/test_browser_widgets_*.py on the notebook JupyterLab saved after its Run
-All, and by tests/test_student_run.py with nbclient where there is no browser.
+version by tests/test_student_run.py.
 
 Run All reaches the last cell; only the autograded test cells (tagged ``raises-exception``,
 which JupyterLab's Run All and nbclient honour) and the ungraded exercise stubs raise; a test
