@@ -86,16 +86,16 @@ def pytest_configure(config):
 # `./course.sh test` runs on two pytest-xdist workers. A test module (and a notebook's cells)
 # runs on one worker, so that its module fixtures are built once and a notebook's cells run
 # in order in one kernel, as `--dist loadfile` does; except the modules in SPLIT, whose tests
-# are independent Run Alls of one chapter each (the student versions with nbclient; the
-# widget notebooks in JupyterLab), which go to whichever worker is free. Work is
+# are independent Run Alls of one chapter each (the student versions, with nbclient), which
+# go to whichever worker is free (a browser test module stays whole: one JupyterLab and one
+# Chromium for its chapters). Work is
 # handed out longest first (HEAVY_FIRST, then the rest in collection order; inside a SPLIT
 # module the later, longer chapters first; every notebook before the short test modules),
 # so that no worker is left with a long test at
 # the end while the other idles (`--no-loadscope-reorder` keeps this order). xdist's own
 # `--dist loadgroup` cannot do this with pytest 9.2: it renames node ids, which pytest 9.2
 # no longer lets it do, and silently falls back to sending single tests.
-SPLIT = ("tests/test_browser_widgets_0508.py", "tests/test_browser_widgets_0104.py",
-         "tests/test_student_run.py")
+SPLIT = ("tests/test_student_run.py",)
 HEAVY_FIRST = ("tests/test_hub.py", "tests/test_install.py", "tests/test_grader_nbgrader.py",
                "tests/test_grader_attacks.py",
                "notebooks/08", "notebooks/05", "notebooks/07", "notebooks/06", "notebooks/",

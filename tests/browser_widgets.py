@@ -145,7 +145,7 @@ def widget_notebook(stem: str):
 
 
 @pytest.fixture(scope="module")
-def lab(chromium, car_park, victoria_park, tmp_path_factory, request):
+def lab(chromium, tmp_path_factory, request):
     import nbformat
 
     work = tmp_path_factory.mktemp("lab-widgets")
@@ -211,7 +211,7 @@ def _pre_texts(text: str) -> str:
                      if line.strip() and not _NOT_TEXT.match(line.strip()))
 
 
-def check_widgets(stem, lab, browser, car_park):
+def check_widgets(stem, lab, browser):
     """Run All of chapter ``stem``'s widget notebook in the browser, then move and check each
     of its widgets (module docstring)."""
     calls = [call for s, call in WIDGETS if s == stem]

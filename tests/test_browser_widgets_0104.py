@@ -7,5 +7,5 @@ NOTEBOOKS = notebooks(1, 4)
 
 
 @pytest.mark.parametrize("stem", NOTEBOOKS)
-def test_every_widget_answers_its_slider_in_jupyterlab(stem, lab, browser, car_park):  # noqa: F811
-    check_widgets(stem, lab, browser, car_park)
+def test_every_widget_answers_its_slider_in_jupyterlab(stem, lab, browser):  # noqa: F811
+    check_widgets(stem, lab, browser)
