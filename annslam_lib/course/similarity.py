@@ -119,14 +119,13 @@ def flag_copies(solutions: dict[str, str], references: dict[str, str] | None = N
     Flags are sorted by similarity, highest first."""
     if not 0.0 < float(threshold) <= 1.0:
         raise ValueError(f"threshold must lie in (0, 1], got {threshold!r}")
+    sources = {**{f"library: {k}": v for k, v in (references or {}).items()}, **solutions}
     tokens = {}
-    for who, src in {**{f"library: {k}": v for k, v in (references or {}).items()},
-                     **solutions}.items():
+    for who, src in sources.items():
         try:
             tokens[who] = normalised(src, function)
         except ValueError:
             continue
-    sources = {**{f"library: {k}": v for k, v in (references or {}).items()}, **solutions}
     students = sorted(s for s in solutions if s in tokens)
     refs = [r for r in tokens if r.startswith("library: ")]
     flags = []

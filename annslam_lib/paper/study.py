@@ -655,12 +655,13 @@ def fold_study(dataset: Dataset, *, seeds=(0, 1, 2), n_folds: int = 5, gap: floa
     histories = {"time": [], "beacons": []}
     ann_cfg = cfg.replace(landmark_model="ann")
     n_time = []
+    tfolds = {s: ann.time_folds(ts, n_folds, gap=gap, seed=s) for s in seeds}
     for k in range(n_folds):
         histories["time"].append([])
         histories["beacons"].append([])
         for j, s in enumerate(seeds):
             tc = dataclasses.replace(base_tc, seed=s)
-            split = ann.time_folds(ts, n_folds, gap=gap, seed=s)[k]
+            split = tfolds[s][k]
             if j == 0:
                 n_time.append(split.train.size + split.val.size)
             for kind, sp in (("time", split), ("beacons", bfolds[k])):
