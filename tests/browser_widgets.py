@@ -47,6 +47,8 @@ SETUP = {
     "01_kinematics": "from annslam_lib.chapters import ch01_kinematics as chapter\n"
                      "from annslam_lib.models.vehicle import ACFR_UTE\n"
                      "chapter.setup()\nV = ACFR_UTE\n",
+    "01a_kalman_filter": "from annslam_lib.chapters import ch01a_kalman_filter as chapter\n"
+                         "chapter.setup(precision=4)\n",
     "02_laser_offset": "from annslam_lib.chapters import ch02_laser_offset as chapter\n"
                        "chapter.setup()\n" + _CAR,
     "03_observation": "from annslam_lib.chapters import ch03_observation as chapter\n"
@@ -86,6 +88,7 @@ SETUP = {
 # (notebook, the widget call exactly as its cell has it)
 WIDGETS = [
     ("01_kinematics", "chapter.kinematics_explorer(V, speed=2.0, steering=0.3, dt=0.2)"),
+    ("01a_kalman_filter", "chapter.update_explorer(mu=12.0, var=0.34, z=12.4, r=0.16)"),
     ("02_laser_offset", "chapter.offset_explorer(car)"),
     ("03_observation", "chapter.measurement_explorer(landmark=(10.0, 3.0), sigma_xy=0.3, "
      "sigma_phi_deg=5.0)"),

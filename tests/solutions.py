@@ -17,7 +17,9 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _chapter_path(chapter: str) -> Path:
-    found = sorted((ROOT / "notebooks").glob(f"{chapter}*.ipynb"))
+    # '01' is 01_kinematics, not also 01a_kalman_filter: the number alone first
+    found = (sorted((ROOT / "notebooks").glob(f"{chapter}_*.ipynb"))
+             or sorted((ROOT / "notebooks").glob(f"{chapter}*.ipynb")))
     if len(found) != 1:
         raise LookupError(f"no single notebook matches {chapter!r}: {found}")
     return found[0]

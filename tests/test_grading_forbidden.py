@@ -11,6 +11,7 @@ from annslam_lib.grading import GradingError
 from annslam_lib.grading import ann as gann
 from annslam_lib.grading import association as ga
 from annslam_lib.grading import ekf as ge
+from annslam_lib.grading import kalman as gkf
 from annslam_lib.grading import kinematics as gkin
 from annslam_lib.grading import metrics as gm
 from annslam_lib.grading import observation as gobs
@@ -18,7 +19,7 @@ from annslam_lib.grading import verdict as gv
 from annslam_lib.models import motion, observation
 from annslam_lib.models.vehicle import Vehicle
 from annslam_lib.perception import association
-from annslam_lib.slam import dense
+from annslam_lib.slam import dense, kalman
 
 from solutions import solution
 
@@ -33,6 +34,14 @@ CASES = [
      lambda v, al, H, L: motion.axle_speed(v, al, _car(L, 3.78, 0.5, H))[0], "models.motion.axle_speed"),
     (gkin.check_euler_step, "01", "my_euler_step",
      lambda p, u, dt, L, a, b: motion.predict(p, u, dt, _car(L, a, b))[0], "models.motion.predict"),
+    (gkf.check_update_1d, "01a", "my_update_1d",
+     lambda m, v, z, r: kalman.update_1d(m, v, z, r)[:2], "slam.kalman.update_1d"),
+    (gkf.check_steady_state, "01a", "my_steady_state",
+     lambda q, r: kalman.steady_state_variance(q, r)[1], "slam.kalman.steady_state_variance"),
+    (gkf.check_kalman_gain, "01a", "my_kalman_gain",
+     lambda P, H, R: dense.kalman_gain(P, H, R)[0], "slam.dense.kalman_gain"),
+    (gkf.check_gate, "01a", "my_gate",
+     lambda nu, S, p: kalman.innovation_gate(nu, S, p)[2], "slam.kalman.innovation_gate"),
     (gkin.check_laser_pose, "02", "my_laser_pose",
      lambda p, a, b: motion.laser_pose(p, _car(2.83, a, b))[0], "models.motion.laser_pose"),
     (gkin.check_laser_velocity, "02", "my_laser_velocity",

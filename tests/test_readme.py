@@ -37,10 +37,10 @@ def test_errata_command_prints_the_table():
 def test_readme_commands_and_notebooks_exist():
     assert "./course.sh lab" in README and "./course.sh test" in README
     assert (ROOT / ".ci" / "run").read_text().rstrip().endswith("exec ./course.sh test")
-    for nb in re.findall(r"\(notebooks/([0-9]{2}_[a-z_]+\.ipynb)\)", README):
+    for nb in re.findall(r"\(notebooks/([0-9]{2}[a-z]?_[a-z_]+\.ipynb)\)", README):
         assert (ROOT / "notebooks" / nb).exists(), f"README links a missing notebook {nb}"
     on_disk = sorted(p.name for p in (ROOT / "notebooks").glob("*.ipynb"))
-    linked = sorted(set(re.findall(r"\(notebooks/([0-9]{2}_[a-z_0-9]+\.ipynb)\)", README)))
+    linked = sorted(set(re.findall(r"\(notebooks/([0-9]{2}[a-z]?_[a-z_0-9]+\.ipynb)\)", README)))
     assert on_disk == linked, f"README notebook map {linked} differs from notebooks/ {on_disk}"
 
 

@@ -8,6 +8,7 @@
 - ``results``: ``SlamResult`` and the per-detection log
 - ``dead_reckoning``: odometry alone, and the initial pose from GPS
 - ``threads``: single-threaded BLAS while a run goes
+- ``kalman``: the Kalman filter in general form (1-D, linear n-D, the gate, the Bayes grid)
 """
 from __future__ import annotations
 
@@ -15,6 +16,6 @@ from .._lazy import attach
 
 __getattr__, __dir__, __all__ = attach(
     __name__, ["config", "base", "efficient", "dense", "runner", "results", "dead_reckoning",
-               "threads"],
+               "threads", "kalman"],
     {"run": "runner", "SlamConfig": "config", "SlamResult": "results", "EkfSlam": "efficient",
      "DenseEkfSlam": "dense"})
