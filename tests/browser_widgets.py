@@ -55,6 +55,8 @@ SETUP = {
                       "chapter.setup(precision=4)\n",
     "04_landmarks_association": "from annslam_lib.chapters import ch04_landmarks as chapter\n"
                                 "chapter.setup()\n" + _CAR,
+    "04a_ekf_localisation": "from annslam_lib.chapters import ch04a_localisation as chapter\n"
+                            "chapter.setup(precision=4)\n" + _CAR,
     "05_ekf_slam": "from annslam_lib.chapters import ch05_ekf_slam as chapter\n"
                    "chapter.setup()\n" + _CAR,
     "06_victoria_park": "from annslam_lib.chapters import ch06_victoria_park as chapter\n"
@@ -94,6 +96,7 @@ WIDGETS = [
      "sigma_phi_deg=5.0)"),
     ("04_landmarks_association", "chapter.beacon_scrubber(car, start=92, max_range=16)"),
     ("04_landmarks_association", "chapter.gate_explorer()"),
+    ("04a_ekf_localisation", "chapter.map_error_explorer(car, beacon=12, shift=0.0)"),
     ("05_ekf_slam", "chapter.slam_explorer(car, t_end=40.0)"),
     ("06_victoria_park", "chapter.run_scrubber(r, vp.gps, start=1100, outliers=out)"),
     ("07_ann_training", "chapter.hidden_size_explorer(grid, hidden=10, seed=0)"),

@@ -13,13 +13,14 @@ from annslam_lib.grading import association as ga
 from annslam_lib.grading import ekf as ge
 from annslam_lib.grading import kalman as gkf
 from annslam_lib.grading import kinematics as gkin
+from annslam_lib.grading import localisation as gloc
 from annslam_lib.grading import metrics as gm
 from annslam_lib.grading import observation as gobs
 from annslam_lib.grading import verdict as gv
 from annslam_lib.models import motion, observation
 from annslam_lib.models.vehicle import Vehicle
 from annslam_lib.perception import association
-from annslam_lib.slam import dense, kalman
+from annslam_lib.slam import dense, kalman, localisation
 
 from solutions import solution
 
@@ -55,6 +56,11 @@ CASES = [
      "models.observation.landmark_from_two_points"),
     (ga.check_associate, "04", "my_associate",
      lambda d2, g, n: association.associate(d2, g, n), "perception.association.associate"),
+    (gloc.check_beacon_update, "04a", "my_beacon_update",
+     lambda pose, P, z, b, R: localisation.beacon_update(pose, P, z, b, R)[:2],
+     r"slam.localisation.beacon_update and annslam_lib\.slam\.dense\.innovation"),
+    (gloc.check_nis_verdict, "04a", "my_nis_verdict",
+     lambda nis, dof, p: localisation.nis_verdict(nis, dof, p)[0], "slam.localisation.nis_verdict"),
     (ge.check_joseph_covariance, "05", "my_joseph_covariance",
      lambda P, H, R, K: dense.joseph_covariance(P, H, R, K), "slam.dense.joseph_covariance"),
     (gm.check_gps_outliers, "06", "my_gps_outliers",

@@ -253,7 +253,7 @@ class MonteCarlo:
     nees: Consistency
     nis: Consistency
     mapped: tuple
-    map: MapConsistency
+    map: MapConsistency | None          # None for a known map (EKF localisation)
     nees_runs: np.ndarray
 
 
@@ -265,7 +265,8 @@ def monte_carlo(seeds, motion_model: str = "euler", route: str = "loop", laps: i
     ``route`` for ``laps`` laps (laser detections only) and judge it
     (notebook 05): the pose NEES and the NIS scan by scan over the runs, the landmarks
     mapped per run, and the NEES of each final map with its joint covariance, summed over
-    the runs. Every run must keep every scan. Computed once per machine (``annslam_lib._cache``)."""
+    the runs (not with ``map_mode='known'``, EKF localisation: ``map`` is then None). Every
+    run must keep every scan. Computed once per machine (``annslam_lib._cache``)."""
     from ..data import simulate
     from ..slam.config import SlamConfig
     from ..slam.runner import run
@@ -285,7 +286,8 @@ def monte_carlo(seeds, motion_model: str = "euler", route: str = "loop", laps: i
         nis.append(s)
         dof.append(d)
         mapped.append(int(r.counts["landmarks"]))
-        maps.append(map_nees(r, ds))
+        if cfg.map_mode == "slam":             # a known map is the truth: nothing to judge
+            maps.append(map_nees(r, ds))
     return MonteCarlo(nees=nees_consistency(nees, t_scan), nis=nis_consistency(nis, dof, t_scan),
-                      mapped=tuple(mapped), map=map_consistency(*zip(*maps)),
+                      mapped=tuple(mapped), map=map_consistency(*zip(*maps)) if maps else None,
                       nees_runs=_stack("nees", nees))

@@ -9,6 +9,7 @@
 - ``dead_reckoning``: odometry alone, and the initial pose from GPS
 - ``threads``: single-threaded BLAS while a run goes
 - ``kalman``: the Kalman filter in general form (1-D, linear n-D, the gate, the Bayes grid)
+- ``localisation``: EKF localisation on a known map (one beacon update, the NIS verdict)
 """
 from __future__ import annotations
 
@@ -16,6 +17,6 @@ from .._lazy import attach
 
 __getattr__, __dir__, __all__ = attach(
     __name__, ["config", "base", "efficient", "dense", "runner", "results", "dead_reckoning",
-               "threads", "kalman"],
+               "threads", "kalman", "localisation"],
     {"run": "runner", "SlamConfig": "config", "SlamResult": "results", "EkfSlam": "efficient",
      "DenseEkfSlam": "dense"})

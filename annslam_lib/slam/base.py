@@ -18,7 +18,7 @@ from ..models.vehicle import Vehicle
 from .config import MOTION_MODELS
 
 __all__ = ["InnovationError", "check_initial", "check_dt", "check_sigmas", "check_z",
-           "check_remove", "FilterBackend", "LandmarkModel"]
+           "check_remove", "with_known_landmarks", "FilterBackend", "LandmarkModel"]
 
 
 class InnovationError(ValueError):
@@ -95,6 +95,20 @@ def check_remove(idx, n_landmarks: int) -> np.ndarray:
 
 
 
+def with_known_landmarks(x, P, xy, sigma: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """The state (x, P) with landmarks at known positions ``xy`` (k, 2) appended (a surveyed
+    map: EKF localisation, chapter 04a): uncorrelated with the pose and with each other,
+    covariance sigma^2 I each. With sigma = 0 the landmarks are exactly known: their rows
+    of P, hence of every gain K = P H^T S^-1, are zero, so no update moves them."""
+    xy = _checks.array("xy", xy, (2,)).reshape(-1, 2)
+    sigma = _checks.real("sigma", sigma, lo=0.0)
+    n, k = x.size, xy.shape[0]
+    Pn = np.zeros((n + 2 * k, n + 2 * k))
+    Pn[:n, :n] = P
+    Pn[n:, n:] = sigma**2 * np.eye(2 * k)
+    return np.concatenate([x, xy.ravel()]), Pn
+
+
 @runtime_checkable
 class FilterBackend(Protocol):
     """The filter as the run loop sees it (laser pose + landmarks, their covariance).
@@ -107,6 +121,7 @@ class FilterBackend(Protocol):
     squared Mahalanobis distances (n, N) of detections to them, for gating; ``update(z, lm, sigma_range, sigma_bearing)`` ->
     (NIS, dof) for the associated detections; ``gps_update(xy, sigma, gate)`` -> (NIS,
     accepted); ``augment(z, sigma_range, sigma_bearing)`` -> indices of the new landmarks;
+    ``add_known_landmarks(xy, sigma)`` -> indices of landmarks at known positions;
     ``remove(idx)`` marginalises landmarks out. Read access: ``pose`` (3,), ``pose_cov``
     (3, 3), ``pose_cov_entries()`` (its six unique entries, cheap), ``n_landmarks``,
     ``state()`` -> (x, P), ``health()`` -> (min eigenvalue, asymmetry)."""
@@ -120,6 +135,7 @@ class FilterBackend(Protocol):
     def update(self, z, lm, sigma_range: float, sigma_bearing: float): ...
     def gps_update(self, xy, sigma_gps: float, gate: float = ...): ...
     def augment(self, z, sigma_range: float, sigma_bearing: float): ...
+    def add_known_landmarks(self, xy, sigma: float = ...): ...
     def remove(self, idx) -> None: ...
     @property
     def pose(self) -> np.ndarray: ...

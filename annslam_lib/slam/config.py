@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from .. import _checks
 from ..data import filter_defaults
 
-__all__ = ["SlamConfig", "GPS_MODES", "ASSOCIATIONS", "MOTION_MODELS", "LANDMARK_MODELS"]
+__all__ = ["SlamConfig", "GPS_MODES", "ASSOCIATIONS", "MAP_MODES", "MOTION_MODELS", "LANDMARK_MODELS"]
 
 #: GPS use: 'none'; 'init' = GPS updates only for the first ``gps_init_seconds``; 'all'.
 GPS_MODES = ("none", "init", "all")
@@ -22,6 +22,10 @@ GPS_MODES = ("none", "init", "all")
 #: Data association: 'nn' = chi-square gated nearest neighbour (``association``);
 #: 'truth' = the detections' true landmark ids (simulator only).
 ASSOCIATIONS = ("nn", "truth")
+
+#: What the filter knows of the map (``SlamConfig.map_mode``): 'slam' = nothing, it builds
+#: the map; 'known' = the dataset's surveyed map, held fixed (EKF localisation, chapter 04a).
+MAP_MODES = ("slam", "known")
 
 #: Discretisations of the motion model (``SlamConfig.motion_model``).
 MOTION_MODELS = ("euler", "midpoint")
@@ -82,6 +86,14 @@ class SlamConfig:
         ``landmark_probation`` seconds of its creation; at the end of the run the
         still-tentative ones below the count are dropped too. 1 keeps every landmark.
         landmark_probation: the probation period, s.
+    The map
+        map_mode: 'slam' (the default: the filter builds the map from nothing) or 'known'
+        (EKF localisation, chapter 04a: the dataset's surveyed map ``Dataset.beacons``, the
+        simulator's true one, is in the state from the start with covariance
+        known_map_sigma^2 I per landmark; detections are associated with it only, and one
+        that matches no landmark is rejected and counted, never added).
+        known_map_sigma: m, the known map's standard deviation per axis; 0 (the default)
+        holds the map exactly (its rows of the gain are then exactly zero).
     GPS (the antenna is the laser point, so GPS measures the state's (x, y))
         gps_mode: 'none', 'init' (updates only during the first ``gps_init_seconds`` of
         the run: anchors the map in the GPS frame) or 'all'.
@@ -121,6 +133,8 @@ class SlamConfig:
     new_landmark_prob: float = 0.99999
     landmark_min_observations: int = 1
     landmark_probation: float = 2.0
+    map_mode: str = "slam"
+    known_map_sigma: float = 0.0
     gps_mode: str = "init"
     gps_init_seconds: float = 10.0
     sigma_gps: float = 0.05
@@ -135,7 +149,8 @@ class SlamConfig:
         o = "SlamConfig."
         for name in ("sigma_speed", "sigma_steer", "sigma_range", "sigma_bearing", "sigma_gps",
                      "min_range", "min_diameter", "gps_init_seconds", "initial_sigma_xy",
-                     "initial_sigma_phi", "landmark_probation", "steer_noise_gain"):
+                     "initial_sigma_phi", "landmark_probation", "steer_noise_gain",
+                     "known_map_sigma"):
             _checks.real(o + name, getattr(self, name), lo=0.0)
         for name in ("range_bias", "bearing_offset"):
             _checks.real(o + name, getattr(self, name))
@@ -156,6 +171,7 @@ class SlamConfig:
         _checks.integer(o + "landmark_min_observations", self.landmark_min_observations, lo=1)
         _checks.integer(o + "checkpoint_every", self.checkpoint_every, lo=1)
         _checks.choice(o + "gps_mode", self.gps_mode, GPS_MODES)
+        _checks.choice(o + "map_mode", self.map_mode, MAP_MODES)
         _checks.choice(o + "motion_model", self.motion_model, MOTION_MODELS)
         _checks.choice(o + "association", self.association, ASSOCIATIONS)
         _checks.choice(o + "landmark_model", self.landmark_model, LANDMARK_MODELS)

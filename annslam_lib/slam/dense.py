@@ -25,7 +25,7 @@ import numpy as np
 
 from .. import _checks
 from ..models import motion as kinematics
-from .base import (InnovationError, check_dt, check_initial, check_remove, check_sigmas,
+from .base import (InnovationError, with_known_landmarks, check_dt, check_initial, check_remove, check_sigmas,
                    check_z)
 from ..models.geometry import wrap_angle
 from ..models.observation import inverse_observe, observe
@@ -178,6 +178,14 @@ class DenseEkfSlam:
         H[0, 0] = H[1, 1] = 1.0
         nis = self._kalman(H, xy - self.x[:2], sigma_gps**2 * np.eye(2), gate)
         return nis, nis <= gate
+
+    def add_known_landmarks(self, xy, sigma: float = 0.0) -> np.ndarray:
+        """Append landmarks at known positions ``xy`` (k, 2) with covariance sigma^2 I each
+        (:func:`slam.base.with_known_landmarks`; EKF localisation, chapter 04a). Returns
+        their indices."""
+        N0 = self.n_landmarks
+        self.x, self.P = with_known_landmarks(self.x, self.P, xy, sigma)
+        return np.arange(N0, self.n_landmarks)
 
     def augment(self, z, sigma_range: float, sigma_bearing: float) -> np.ndarray:
         check_sigmas("augment", sigma_range, sigma_bearing)

@@ -60,7 +60,7 @@ from ..models.geometry import wrap_angle, wrap_difference
 from ..models.observation import inverse_observe, observe_fast
 from ..perception.association import mahalanobis
 from ..models.vehicle import Vehicle
-from .base import (InnovationError, check_dt, check_initial, check_remove, check_sigmas,
+from .base import (InnovationError, with_known_landmarks, check_dt, check_initial, check_remove, check_sigmas,
                    check_z)
 
 __all__ = ["EkfSlam", "diag_blocks"]
@@ -430,6 +430,16 @@ class EkfSlam:
             self.x[2] = _PI - (_PI - x2) % _TWO_PI
         self._load_vehicle()
         return nis, nu.size
+
+    def add_known_landmarks(self, xy, sigma: float = 0.0) -> np.ndarray:
+        """Append landmarks at known positions ``xy`` (k, 2) with covariance sigma^2 I each
+        (:func:`slam.base.with_known_landmarks`; EKF localisation, chapter 04a). Returns
+        their indices."""
+        self.flush()
+        N0 = self.n_landmarks
+        self.x, self.P = with_known_landmarks(self.x, self.P, xy, sigma)
+        self._om = None
+        return np.arange(N0, self.n_landmarks)
 
     def augment(self, z, sigma_range: float, sigma_bearing: float) -> np.ndarray:
         """Add landmarks for observations z (k, 2) from the current pose

@@ -223,6 +223,14 @@ class LandmarkBook:
             self.by_true_id.update(zip(true_ids, new))
         return new
 
+    def known(self, n: int, t: float) -> None:
+        """Register the ``n`` landmarks of a known map (already in the state, in order):
+        confirmed from the start, never pruned; the simulator's ids are their indices."""
+        uids = self.created(t, n, list(range(n)))
+        self.tentative.difference_update(uids)
+        for uid in uids:
+            self.seen[uid] = 0
+
     def truth_assign(self, true_ids) -> list[int]:
         """Known data association (simulator): the state index of each detection's true
         landmark, NEW (-1) for the first sighting in a scan of an unmapped one, REJECTED
@@ -292,6 +300,7 @@ class _ScanStep:
         self.gate = chi2_quantile(cfg.gate_prob, 2)
         self.new_thr = chi2_quantile(cfg.new_landmark_prob, 2)
         self.truth = cfg.association == "truth"
+        self.known = cfg.map_mode == "known"      # localisation: nothing is ever added
 
     def __call__(self, k: int, t: float, prior: tuple) -> tuple[float, int] | None:
         """Process scan ``k`` at time ``t`` seen from the predicted pose ``prior``; the
@@ -325,6 +334,10 @@ class _ScanStep:
                 d.status[use_l[i]] = STATUS["associated"]
                 d.uid[use_l[i]] = uid
         new = [i for i, j in enumerate(assign) if j == -1]
+        if new and self.known:                 # matches no landmark of the known map
+            for i in new:
+                d.status[use_l[i]] = STATUS["rejected"]
+            new = []
         if new:
             filt.augment(z[new], self.sr, self.sb)
             ids = [int(d.det.landmark_id[use_l[i]]) for i in new] if self.truth else None
@@ -362,6 +375,13 @@ def _run(dataset, config, progress, backend, landmark_model=None, inspect=None) 
     pose0, init_info = _initial(ds, cfg)
     P0 = np.diag([cfg.initial_sigma_xy**2, cfg.initial_sigma_xy**2, cfg.initial_sigma_phi**2])
     filt = make(pose0, P0, ds.vehicle, cfg.motion_model)
+    book = LandmarkBook(cfg.landmark_min_observations, cfg.landmark_probation)
+    if cfg.map_mode == "known":                # EKF localisation on the surveyed map
+        if ds.beacons is None:
+            raise ValueError(f"SlamConfig.map_mode = 'known' needs a surveyed map, and "
+                             f"dataset {ds.name!r} has none (Dataset.beacons is None)")
+        filt.add_known_landmarks(ds.beacons, cfg.known_map_sigma)
+        book.known(ds.beacons.shape[0], float(odo.t[0]) if len(odo) else 0.0)
     if inspect is not None:
         inspect(filt)
     controls = control_table(odo, ds.vehicle, cfg.sigma_speed, cfg.sigma_steer, cfg.steer_noise_gain)
@@ -375,7 +395,6 @@ def _run(dataset, config, progress, backend, landmark_model=None, inspect=None) 
     gps_xy = ds.gps.xy
 
     dets = _Detections(det, cfg)
-    book = LandmarkBook(cfg.landmark_min_observations, cfg.landmark_probation)
     scan_step = _ScanStep(filt, book, dets, cfg, lmodel, sr, sb)
     n_scans = len(det)
     traj_rows: list[tuple] = []            # pose after each processed scan

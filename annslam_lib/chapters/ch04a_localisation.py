@@ -1,0 +1,264 @@
+"""Chapter 04a companion: EKF localisation on the surveyed Car Park map, its experiments,
+figures and the map-error explorer.
+
+Each experiment is a function returning numbers (tested without a notebook); the filter
+is :func:`annslam_lib.slam.localisation.localise` (the course's run with the map known).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.stats import chi2
+from ipywidgets import Dropdown, FloatSlider, interactive
+
+from .. import _checks
+from ..data.records import Dataset, truncate
+from ..evaluation.summary import run_metrics
+from ..evaluation.trajectory import trajectory_errors
+from ..plots.style import figure, show_widget_figure, widget_figure
+from ..plots.style import notebook_setup as setup
+from ..slam import localisation
+from ..slam.config import SlamConfig
+from ..slam.dead_reckoning import dead_reckon
+from ..slam.results import STATUS
+from ..slam.runner import run
+
+__all__ = ["setup", "compare", "COMPARED", "paths_figure", "errors_figure",
+           "moved_beacon_sweep", "moved_beacon_figure", "missing_beacon", "state_at",
+           "wrong_association", "map_error_summary", "map_error_explorer", "EXPLORER_FIGSIZE"]
+
+#: The runs :func:`compare` makes: (label, map mode, GPS mode).
+COMPARED = (("SLAM, GPS for 10 s", "slam", "init"), ("SLAM, no GPS", "slam", "none"),
+            ("localisation, GPS for 10 s", "known", "init"), ("localisation, no GPS", "known", "none"))
+EXPLORER_FIGSIZE = (7.5, 3.6)
+
+
+_RUNS: dict = {}
+
+
+def _localise(car: Dataset, cfg: SlamConfig):
+    """:func:`localisation.localise`, remembered for the last few (dataset, config) pairs:
+    the chapter's experiments start from the same run (the dataset is kept in the key's
+    value, so its id is not reused while remembered)."""
+    key = (id(car), cfg)
+    if key not in _RUNS:
+        if len(_RUNS) >= 8:
+            _RUNS.pop(next(iter(_RUNS)))
+        _RUNS[key] = (car, localisation.localise(car, cfg))
+    return _RUNS[key][1]
+
+
+def _row(label: str, r, car: Dataset) -> dict:
+    m = run_metrics(r, car)
+    e = trajectory_errors(r.odometry_trajectory, car.gps)
+    return {"label": label, "result": r, "traj_rmse": m.traj_rmse,
+            "traj_rmse_aligned": m.traj_rmse_aligned, "max_error": e.max,
+            "pose_sigma": math.sqrt(m.pose_trace / 2.0) if m.pose_trace >= 0 else math.nan,
+            "nis_per_dof": m.nis_per_dof, "landmarks": m.landmarks,
+            "rejected": int(r.counts["rejected"]), "associated": int(r.counts["associated"]),
+            "errors": e}
+
+
+def compare(car: Dataset) -> list[dict]:
+    """Dead reckoning, SLAM and localisation on the same run, with GPS for the first 10 s
+    and without any: per run its trajectory RMSE against GPS (absolute and SE(2)-aligned),
+    largest error, mean position sigma, laser NIS per dof and counts."""
+    base = SlamConfig.for_dataset(car.name)
+    rows = []
+    first = run(car, base.replace(gps_mode="none"), progress=False)
+    dr = dead_reckon(car.odometry, first.initial_pose, car.vehicle)
+    e = trajectory_errors(dr, car.gps)
+    rows.append({"label": "dead reckoning", "result": None, "traj_rmse": e.rmse,
+                 "traj_rmse_aligned": e.rmse_aligned, "max_error": e.max,
+                 "pose_sigma": math.nan, "nis_per_dof": math.nan, "landmarks": 0,
+                 "rejected": 0, "associated": 0, "errors": e, "trajectory": dr})
+    for label, mode, gps in COMPARED:
+        if (mode, gps) == ("slam", "none"):
+            r = first
+        elif mode == "known":
+            r = _localise(car, base.replace(gps_mode=gps))
+        else:
+            r = run(car, base.replace(gps_mode=gps), progress=False)
+        rows.append(_row(label, r, car))
+    return rows
+
+
+def paths_figure(car: Dataset, rows: list[dict]):
+    """GPS, SLAM and localisation without GPS, and the surveyed beacons."""
+    fig, ax = figure(height=5.5)
+    ax.plot(*car.gps.xy.T, ".", color="0.6", ms=2, label="GPS")
+    by = {r["label"]: r for r in rows}
+    for label, color in [("SLAM, no GPS", "tab:orange"), ("localisation, no GPS", "tab:blue")]:
+        tr = by[label]["result"].odometry_trajectory
+        ax.plot(tr[:, 1], tr[:, 2], color=color, lw=1.2,
+                label=f"{label}: RMSE {by[label]['traj_rmse']:.2f} m")
+    ax.plot(*car.beacons.T, "k^", ms=7, label="surveyed beacons (the known map)")
+    ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal",
+           title="the same run, the map known or built")
+    ax.legend(fontsize=8, loc="lower right")
+    ax.grid(True, alpha=0.3)
+    return fig
+
+
+def errors_figure(rows: list[dict]):
+    """Position error against GPS over time, every run of :func:`compare` but dead
+    reckoning (off the scale: its RMSE is in the table)."""
+    fig, ax = figure(height=3.4)
+    for r in rows[1:]:
+        e = r["errors"]
+        ax.plot(e.t, e.error, lw=1, label=r["label"])
+    ax.set(xlabel="time [s]", ylabel="error against GPS [m]", yscale="log",
+           title="position error along the run")
+    ax.legend(fontsize=8, ncol=2)
+    ax.grid(True, alpha=0.3, which="both")
+    return fig
+
+
+# ------------------------------------------------------------------ what if the map is wrong
+
+def _sightings(o, beacon: int) -> np.ndarray:
+    """The detections of an observation log associated with ``beacon``."""
+    return (o.landmark == beacon) & (o.status == STATUS["associated"])
+
+
+def moved_beacon_sweep(car: Dataset, beacon: int, shifts, *, gps_mode: str = "none") -> dict:
+    """Localisation with beacon ``beacon`` of the known map moved by each of ``shifts``
+    metres along x (the true beacon stays where it is). Per shift: how many of the
+    beacon's sightings (those of the run with the right map) were still associated or
+    were rejected, the trajectory RMSE against GPS and the laser NIS per dof."""
+    beacon = _checks.integer("beacon", beacon, lo=0, hi=len(car.beacons) - 1)
+    cfg = SlamConfig.for_dataset(car.name, gps_mode=gps_mode)
+    ref = _localise(car, cfg)
+    own = _sightings(ref.observations, beacon)
+    rows = []
+    for s in shifts:
+        b = car.beacons.copy()
+        b[beacon, 0] += _checks.real("shift", s)
+        r = ref if s == 0 else localisation.localise(localisation.with_beacons(car, b), cfg)
+        m = run_metrics(r, car)
+        rows.append({"shift": float(s), "accepted": int(np.sum(_sightings(r.observations, beacon)[own])),
+                     "rejected": int(np.sum((r.observations.status == STATUS["rejected"])[own])),
+                     "traj_rmse": m.traj_rmse, "nis_per_dof": m.nis_per_dof})
+    return {"beacon": beacon, "sightings": int(own.sum()), "rows": rows}
+
+
+def moved_beacon_figure(sweep: dict):
+    """Trajectory RMSE and the moved beacon's accepted sightings against the shift."""
+    fig, (ax0, ax1) = figure(1, 2, height=3.3)
+    s = [r["shift"] for r in sweep["rows"]]
+    ax0.plot(s, [r["traj_rmse"] for r in sweep["rows"]], "o-")
+    ax0.set(xlabel="shift of the beacon in the map [m]", ylabel="trajectory RMSE [m]",
+            title=f"beacon {sweep['beacon']} moved: the path")
+    ax1.plot(s, [r["accepted"] for r in sweep["rows"]], "o-", color="tab:green", label="accepted")
+    ax1.plot(s, [r["rejected"] for r in sweep["rows"]], "s-", color="tab:red", label="rejected")
+    ax1.set(xlabel="shift of the beacon in the map [m]", ylabel="sightings",
+            title=f"its {sweep['sightings']} sightings: what the gate did")
+    ax1.legend(fontsize=8)
+    for ax in (ax0, ax1):
+        ax.grid(True, alpha=0.3)
+    return fig
+
+
+def missing_beacon(car: Dataset, beacon: int, *, gps_mode: str = "none") -> dict:
+    """Localisation with beacon ``beacon`` left out of the map: what became of its
+    sightings (associated with another beacon = a wrong association, or rejected)."""
+    beacon = _checks.integer("beacon", beacon, lo=0, hi=len(car.beacons) - 1)
+    cfg = SlamConfig.for_dataset(car.name, gps_mode=gps_mode)
+    own = _sightings(_localise(car, cfg).observations, beacon)
+    r = localisation.localise(localisation.with_beacons(car, np.delete(car.beacons, beacon, 0)), cfg)
+    st = r.observations.status[own]
+    d = np.linalg.norm(car.beacons - car.beacons[beacon], axis=1)
+    d[beacon] = np.inf
+    return {"beacon": beacon, "sightings": int(own.sum()),
+            "wrongly_associated": int(np.sum(st == STATUS["associated"])),
+            "rejected": int(np.sum(st == STATUS["rejected"])),
+            "nearest": int(np.argmin(d)), "nearest_distance": float(d.min()),
+            "traj_rmse": run_metrics(r, car).traj_rmse}
+
+
+def state_at(car: Dataset, t: float, *, gps_mode: str = "none") -> tuple[np.ndarray, np.ndarray]:
+    """The localisation filter's pose and its covariance after the last event before ``t``
+    (the run cut at ``t``)."""
+    r = localisation.localise(truncate(car, t), SlamConfig.for_dataset(car.name, gps_mode=gps_mode))
+    return r.state[:3].copy(), r.covariance[:3, :3].copy()
+
+
+def wrong_association(car: Dataset, beacon: int, wrong: int, *, after: float = 30.0) -> dict:
+    """The first sighting of ``beacon`` after ``after`` seconds, used once with the right
+    beacon and once with ``wrong``: the pose each update gives, and each one's d2 against
+    the gate (``SlamConfig.gate_prob``, 2 dof)."""
+    cfg = SlamConfig.for_dataset(car.name, gps_mode="none")
+    o = _localise(car, cfg).observations
+    k = int(np.flatnonzero(_sightings(o, beacon) & (o.t > after))[0])
+    pose, P = state_at(car, float(o.t[k]) - 1e-6)
+    # predict to the sighting's time is what the run did; the cut run stops at the last
+    # event before it, so the prior here is that state (a few ms older)
+    R = np.diag([cfg.sigma_range**2, cfg.sigma_bearing**2])
+    z = np.array([o.range[k], o.bearing[k]])
+    out = {"t": float(o.t[k]), "z": z, "prior": pose, "P": P,
+           "gate": float(chi2.ppf(cfg.gate_prob, 2))}
+    for name, j in (("right", beacon), ("wrong", wrong)):
+        new, P_new, info = localisation.beacon_update(pose, P, z, car.beacons[j], R)
+        out[name] = {"beacon": j, "pose": new, "P": P_new, "d2": info["d2"],
+                     "moved": float(np.hypot(*(new[:2] - pose[:2]))),
+                     "turned_deg": math.degrees(float(new[2] - pose[2]))}
+    return out
+
+
+# ----------------------------------------------------------------------------- the explorer
+
+def map_error_summary(car: Dataset, beacon: int, shift: float, *, cache: dict | None = None) -> dict:
+    """One setting of the explorer: localisation (no GPS) with ``beacon`` moved by
+    ``shift`` m along x; its RMSE, the beacon's accepted and rejected sightings (of those
+    the right map's run associated), and the error along the run. ``cache`` keeps earlier
+    settings."""
+    cache = {} if cache is None else cache
+    beacon = _checks.integer("beacon", beacon, lo=0, hi=len(car.beacons) - 1)
+    key = (beacon, round(_checks.real("shift", shift), 6))
+    if key in cache:
+        return cache[key]
+    cfg = SlamConfig.for_dataset(car.name, gps_mode="none")
+    own = _sightings(_localise(car, cfg).observations, beacon)
+    b = car.beacons.copy()
+    b[beacon, 0] += key[1]
+    r = localisation.localise(localisation.with_beacons(car, b), cfg)
+    m = run_metrics(r, car)
+    cache[key] = {"beacon": beacon, "shift": key[1], "sightings": int(own.sum()),
+                  "accepted": int(np.sum(_sightings(r.observations, beacon)[own])),
+                  "rejected": int(np.sum((r.observations.status == STATUS["rejected"])[own])),
+                  "traj_rmse": m.traj_rmse, "nis_per_dof": m.nis_per_dof,
+                  "errors": trajectory_errors(r.odometry_trajectory, car.gps)}
+    return cache[key]
+
+
+def map_error_explorer(car: Dataset, *, beacon: int = 12, shift: float = 0.0):
+    """A dropdown for the beacon and a slider for how far its map position is wrong; shows
+    the localisation error along the run and what the gate did with its sightings.
+    ``widget.holder['summary']`` keeps the latest :func:`map_error_summary`."""
+    holder, cache = {}, {}
+    ref = map_error_summary(car, beacon, 0.0, cache=cache)["errors"]     # the right map
+
+    def draw(shift: float, beacon: int) -> None:
+        s = map_error_summary(car, beacon, shift, cache=cache)
+        fig, ax = widget_figure(figsize=EXPLORER_FIGSIZE)
+        ax.plot(ref.t, ref.error, color="0.6", lw=1, label="the right map")
+        ax.plot(s["errors"].t, s["errors"].error, color="tab:red", lw=1,
+                label=f"beacon {s['beacon']} moved {s['shift']:.1f} m")
+        ax.set(xlabel="time [s]", ylabel="error against GPS [m]",
+               title="localisation without GPS on a wrong map")
+        ax.legend(fontsize=8, loc="upper left")
+        ax.grid(True, alpha=0.3)
+        holder["summary"] = s
+        print(f"beacon {s['beacon']} moved {s['shift']:.1f} m: RMSE {s['traj_rmse']:.3f} m; of its "
+              f"{s['sightings']} sightings {s['accepted']} accepted, {s['rejected']} rejected by "
+              f"the gate; laser NIS/dof {s['nis_per_dof']:.3f}")
+        show_widget_figure(fig)
+
+    widget = interactive(
+        draw,
+        shift=FloatSlider(value=shift, min=0.0, max=1.5, step=0.1, description="shift [m]",
+                          continuous_update=False, readout_format=".1f"),
+        beacon=Dropdown(options=list(range(len(car.beacons))), value=beacon, description="beacon"))
+    widget.holder = holder
+    return widget
