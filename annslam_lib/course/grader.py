@@ -93,6 +93,10 @@ class SubmissionGrade:
     reason: str = ""                     # why it could not be graded
     isolation: str = ""
     seconds: float = 0.0
+    # copied-code flags (grade_batch): {exercise, other, similarity}; never a score
+    flags: list[dict] = field(default_factory=list)
+    # what the flags compare, per test cell: {functions, source, references}; not reported
+    solution_sources: dict = field(default_factory=dict, repr=False)
 
     def report(self) -> str:
         who = f" ({self.student})" if self.student else ""
@@ -108,10 +112,13 @@ class SubmissionGrade:
                 lines += ["       " + s for s in r.message.splitlines()[:6]]
         lines += [f"  note: {n}" for n in self.notes]
         lines += [f"  error outside the exercises: {e}" for e in self.errors]
+        lines += [f"  FLAG {f['exercise']}: {f['similarity']:.2f} similar to {f['other']} "
+                  f"(copied code? not scored: the instructor decides)" for f in self.flags]
         return "\n".join(lines)
 
     def as_json(self) -> dict:
         d = asdict(self)
+        d.pop("solution_sources")
         d["exercises"] = [asdict(r) for r in self.exercises]
         return d
 
@@ -381,6 +388,84 @@ def _checks_used(source: str, ns: dict) -> list:
     return found
 
 
+# ------------------------------------------------------------------------------ copied code
+
+def _solution_sources(gplan: GradePlan, tests, solutions: dict[str, int]) -> dict:
+    """Per test cell: the student's functions it checks, the source of their solution
+    cell, and the library functions its checks forbid (the references a copy would come
+    from). Read from the plan, in the grader: no student code runs here."""
+    ns: dict = {"__name__": "__annslam_sources__"}
+    for stmt in gplan.grading_imports:
+        exec(stmt, ns)                                   # the instructor's own imports
+    aliases = set(ns)
+    out = {}
+    for cell in tests:
+        names = sorted(n for n in free_names(cell.source) - aliases if n in solutions)
+        if not names:
+            continue
+        paths = [p for c in _checks_used(cell.source, ns)
+                 for p in getattr(c, "__annslam_forbids__", ())]
+        out[cell.grade_id] = {"functions": names,
+                              "source": "\n".join(dict.fromkeys(
+                                  gplan.cells[solutions[n]].source for n in names)),
+                              "references": list(dict.fromkeys(paths))}
+    return out
+
+
+def _reference_source(path: str) -> str | None:
+    """The source of the library function 'module:qualname', or None."""
+    import importlib
+    import inspect
+
+    mod, _, qual = path.partition(":")
+    try:
+        obj = importlib.import_module(mod)
+        for part in qual.split("."):
+            obj = getattr(obj, part)
+        return inspect.getsource(inspect.unwrap(obj))
+    except (ImportError, AttributeError, OSError, TypeError):
+        return None
+
+
+def flag_copied_code(results: list[SubmissionGrade], *, threshold: float | None = None) -> int:
+    """Compare, exercise by exercise, every graded submission's solution with the library's
+    implementation of the function it asks for and with the other submissions of the same
+    notebook (:func:`similarity.flag_copies`); add each flag to the submissions involved
+    (``SubmissionGrade.flags``). Scores are not touched. Returns the number of flags."""
+    from .similarity import THRESHOLD, flag_copies
+
+    by_notebook: dict[str, list[SubmissionGrade]] = {}
+    for g in results:
+        if g.graded:
+            by_notebook.setdefault(g.notebook, []).append(g)
+    labels = {id(g): labels_of(g) for g in results}
+    n = 0
+    for subs in by_notebook.values():
+        exercises = sorted({gid for g in subs for gid in g.solution_sources})
+        for gid in exercises:
+            # a solution still the released stub is no solution: nothing to compare
+            have = [g for g in subs if gid in g.solution_sources and not any(
+                r.grade_id == gid and r.status == "not written" for r in g.exercises)]
+            if not have:
+                continue
+            sols = {labels[id(g)]: g.solution_sources[gid]["source"] for g in have}
+            refs = {}
+            for p in have[0].solution_sources[gid]["references"]:
+                src = _reference_source(p)
+                if src is not None:
+                    refs[p.replace(":", ".")] = src
+            fn = have[0].solution_sources[gid]["functions"][0]
+            who = {labels[id(g)]: g for g in have}
+            for f in flag_copies(sols, refs, function=None,
+                                 threshold=THRESHOLD if threshold is None else threshold):
+                entry = {"exercise": gid, "function": fn, "similarity": round(f.similarity, 3)}
+                who[f.student].flags.append({**entry, "other": f.other})
+                if f.other in who:
+                    who[f.other].flags.append({**entry, "other": f.student})
+                n += 1
+    return n
+
+
 # ------------------------------------------------------------------------------ integrity
 
 def _fingerprint(folders) -> dict[str, str]:
@@ -465,6 +550,7 @@ def grade_submission(path, instructor, *, limits: Limits = Limits(), isolation: 
                 solutions.setdefault(name, k)
     tests = [c for c in gplan.cells if c.role == "test"]
     g.max_score = sum(c.points for c in tests)
+    g.solution_sources = _solution_sources(gplan, tests, solutions)
     guard = [Path(p) for p in (guard or [])]
     backup = _snapshot(guard) if guard else {}
     try:
@@ -576,7 +662,20 @@ def grade_batch(paths, *, instructor_dir=None, json_path=None, limits: Limits = 
         log(g.report())
         if json_path:
             _write_json(json_path, results)
+    n = flag_copied_code(results)
+    if n:
+        log(f"copied-code flags ({n} pair(s); for the instructor to read, no score changed):")
+        for g in results:
+            for f in g.flags:
+                log(f"  {labels_of(g)} {f['exercise']}: {f['similarity']:.2f} similar to {f['other']}")
+    if json_path:
+        _write_json(json_path, results)
     return results
+
+
+def labels_of(g: SubmissionGrade) -> str:
+    """How a submission is named in the flags: its student, else its path."""
+    return g.student or g.submission
 
 
 def _write_json(path, results) -> None:

@@ -1,0 +1,279 @@
+"""Checks of the capstone (chapter 09): a student's whole EKF-SLAM loop, scored on what it
+does on simulated runs it has not seen, with feedback that names the piece at fault.
+
+Three checks, one per graded cell: :func:`check_runs` (the loop runs to the end and returns
+a well-formed track), :func:`check_consistency` (its pose NEES and its final map's NEES
+are those of an honest filter: the mean pose NEES over the runs within [dof/4, 2 dof] and
+each map's NEES per dof at most 3, limits set on the reference loop, whose values are
+2.2-3.7 and 1.1-1.5 on the grader's runs) and :func:`check_map` (every true landmark
+mapped once, within 0.15 m RMS, at most one spurious landmark per run). A failed check
+probes the student's pieces one by one on crafted states (:func:`diagnose`) and names the
+first defect it finds: a cross covariance not propagated or not updated, a wrong sign in
+F, an unwrapped bearing innovation, an augmentation without its cross terms.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..chapters import ch09_capstone as cap
+from ..models.vehicle import ACFR_UTE
+from ..slam import dense
+from .core import Passed, call, fail, forbids
+
+__all__ = ["RUNS", "check_runs", "check_consistency", "check_map", "diagnose", "score", "try_run"]
+
+#: The runs the notebook's visible checks use (the hidden ones use others).
+RUNS = ("sim:3001:1",)
+_KEYS = ("t", "pose", "pose_cov", "landmarks", "landmark_cov")
+_CACHE: dict = {}
+NEES_LIMITS = (0.75, 6.0)
+MAP_NEES_LIMIT = 3.0
+MAP_RMSE_LIMIT = 0.15
+
+
+def _done(ok: str, quiet: bool) -> Passed:
+    if not quiet:
+        print(ok)
+    return Passed(ok)
+
+
+def _result(fn, run: str, name: str, pieces=None) -> dict:
+    """``fn(run)``, checked for its form, with the probes' diagnosis added to a failure
+    (cached for a local function: the three checks of one notebook run the loop once per
+    run)."""
+    from .core import GradingError
+    try:
+        return _result_of(fn, run, name)
+    except GradingError as e:
+        raise GradingError(f"{e}{_cause(pieces)}") from None
+
+
+def _result_of(fn, run: str, name: str) -> dict:
+    key = (id(fn), run)
+    if key in _CACHE and _CACHE[key][0] is fn:
+        return _CACHE[key][1]
+    out = call(fn, (run,), name=name, arg_names=("run",))
+    if not isinstance(out, dict) or any(k not in out for k in _KEYS):
+        fail(f"{name}({run!r}) returned {type(out).__name__}; it must return track.result(), a "
+             f"dict with the keys {', '.join(_KEYS)}.")
+    r = {k: np.asarray(out[k], dtype=float) for k in _KEYS}
+    K = r["t"].size
+    problems = []
+    if K == 0:
+        problems.append("no scan was recorded (call track.record(t, x, P) after every scan)")
+    if r["pose"].shape != (K, 3) or r["pose_cov"].shape != (K, 3, 3):
+        problems.append(f"pose {r['pose'].shape} and pose_cov {r['pose_cov'].shape} must be "
+                        f"({K}, 3) and ({K}, 3, 3), one per recorded scan")
+    N = r["landmarks"].size // 2
+    if r["landmark_cov"].shape != (2 * N, 2 * N):
+        problems.append(f"landmark_cov is {r['landmark_cov'].shape}, expected ({2 * N}, {2 * N}) "
+                        f"for {N} landmarks")
+    if not problems:
+        bad = [k for k in _KEYS if not np.all(np.isfinite(r[k]))]
+        if bad:
+            problems.append(f"{', '.join(bad)} hold NaN or infinite values")
+        elif K and np.any(np.diff(r["t"]) < 0):
+            problems.append("the scan times go backwards")
+        else:
+            C = r["pose_cov"]
+            asym = float(np.max(np.abs(C - np.swapaxes(C, 1, 2)))) if K else 0.0
+            low = float(np.min(np.linalg.eigvalsh(0.5 * (C + np.swapaxes(C, 1, 2))))) if K else 0.0
+            if asym > 1e-9 or low < -1e-12:
+                k = int(np.argmin(np.linalg.eigvalsh(0.5 * (C + np.swapaxes(C, 1, 2)))[:, 0]))
+                problems.append(f"the pose covariance is not a covariance (asymmetry {asym:.2g}, "
+                                f"smallest eigenvalue {low:.2g}, first at scan {k})")
+    if problems:
+        fail(f"{name}({run!r}): " + "; ".join(problems) + ".")
+    _CACHE[key] = (fn, r)
+    return r
+
+
+def _pieces(pieces) -> dict:
+    return dict(pieces or {})
+
+
+def try_run(my_slam, run: str):
+    """``my_slam(run)`` for a notebook's demonstration cell: None, with a line that says so,
+    while the loop is not written yet (so that Run All goes on)."""
+    try:
+        return my_slam(run)
+    except NotImplementedError:
+        print("my_slam is not written yet: write it above, run its cell, then this one")
+        return None
+
+
+# ------------------------------------------------------------------------- the probes
+
+def _probe_state(seed: int = 0):
+    """A pose with two landmarks and a correlated P (pose-map cross terms non-zero)."""
+    rng = np.random.default_rng(seed)
+    x = np.array([2.0, -1.0, 0.6, 9.0, 4.0, -3.0, 8.0])
+    A = rng.normal(size=(7, 7)) * np.array([0.2, 0.2, 0.05, 0.3, 0.3, 0.3, 0.3])
+    return x, A @ A.T + 1e-3 * np.eye(7)
+
+
+def diagnose(pieces) -> str | None:
+    """The first defect the probes find in ``pieces`` {'predict', 'update', 'augment'}
+    (any may be missing), as a sentence; None if they agree with the reference."""
+    p = _pieces(pieces)
+    x, P = _probe_state()
+    R = np.diag([0.1**2, math.radians(1.0) ** 2])
+    if "predict" in p:
+        u, dt, Q = np.array([3.0, 0.2]), 0.1, np.diag([0.04, 0.01])
+        try:
+            xr, Pr = cap.reference_predict(x, P, u, dt, Q, ACFR_UTE)
+            xs, Ps = (np.asarray(a, float) for a in p["predict"](x.copy(), P.copy(), u, dt, Q, ACFR_UTE))
+        except Exception as e:             # noqa: BLE001 (the student's code)
+            return f"my_predict raised {type(e).__name__}: {e}"
+        if Ps.shape == Pr.shape and not np.allclose(Ps, Pr, atol=1e-9):
+            if np.allclose(Ps[:3, 3:], P[:3, 3:]) and not np.allclose(Pr[:3, 3:], P[:3, 3:]):
+                return ("my_predict does not propagate the cross covariances between the pose and "
+                        "the map: after a prediction P_vm must become F P_vm (and P_mv its "
+                        "transpose); left unchanged, the map keeps correlations with a pose the car "
+                        "has left")
+            _, F, _ = cap.midpoint_step(x[:3], u, dt, ACFR_UTE)
+            Fw = F.copy()
+            Fw[:2, 2] *= -1
+            Pw = P.copy()
+            Pw[:3, :] = Fw @ Pw[:3, :]
+            Pw[:, :3] = Pw[:, :3] @ Fw.T
+            if np.allclose(Ps[:3, :3] - Pw[:3, :3], Pr[:3, :3] - (F @ P[:3, :3] @ F.T), atol=1e-9):
+                return ("the heading column of my_predict's F has the wrong sign: d x_k / d phi and "
+                        "d y_k / d phi (entries [0, 2] and [1, 2]) must rotate the position with the "
+                        "heading (chapter 01, exercise 1.3)")
+            return "my_predict's covariance differs from F P F^T + G Q G^T on a state with landmarks"
+    if "update" in p:
+        # a landmark straight behind-left, its bearing predicted just below +pi, seen just above -pi
+        pose = np.array([0.0, 0.0, 0.0])
+        a = math.pi / 2 - 0.002
+        xl = np.r_[pose, 10 * math.cos(a), 10 * math.sin(a), 5.0, 5.0]
+        Pl = P.copy()
+        z = np.array([[10.05, -math.pi + 0.004]])
+        try:
+            xr, Pr = cap.reference_update(xl, Pl, z, [0], R)
+            xs, Ps = (np.asarray(v, float) for v in p["update"](xl.copy(), Pl.copy(), z, np.array([0]), R))
+        except Exception as e:             # noqa: BLE001
+            return f"my_update raised {type(e).__name__}: {e}"
+        if xs.shape == xr.shape and np.max(np.abs(xs[:2] - xr[:2])) > 0.05:
+            return ("my_update does not wrap the bearing innovation: a landmark predicted just "
+                    "below +pi and seen just above -pi is a few mrad off, not almost 2 pi; wrap "
+                    "z_bearing - zhat_bearing into (-pi, pi]")
+        if Ps.shape == Pr.shape and not np.allclose(Ps, Pr, atol=1e-9):
+            if np.allclose(Ps[:3, 5:], Pl[:3, 5:]) or np.allclose(Ps[3:5, 5:], Pl[3:5, 5:]):
+                return ("my_update does not update the cross covariances: every block of P changes "
+                        "in an update, P+ = (I - K H) P (I - K H)^T + K R K^T over the WHOLE state, "
+                        "including the landmarks not seen")
+            return "my_update's covariance differs from the Joseph form over the whole state"
+    if "augment" in p:
+        zn = np.array([6.0, 1.2])
+        try:
+            xr, Pr = cap.reference_augment(x, P, zn, R)
+            xs, Ps = (np.asarray(v, float) for v in p["augment"](x.copy(), P.copy(), zn, R))
+        except Exception as e:             # noqa: BLE001
+            return f"my_augment raised {type(e).__name__}: {e}"
+        if Ps.shape == Pr.shape and not np.allclose(Ps, Pr, atol=1e-9):
+            if np.allclose(Ps[7:, :7], 0.0):
+                return ("my_augment leaves the new landmark uncorrelated with the state: its rows "
+                        "must be G_v P_{v,:} (chapter 05, exercise 5.1)")
+            return "my_augment's covariance differs from chapter 05's block formula"
+    return None
+
+
+def _cause(pieces) -> str:
+    d = diagnose(pieces)
+    return f" Probing your pieces: {d}." if d else ""
+
+
+# ------------------------------------------------------------------------- the checks
+
+def _library_filters():
+    from ..slam import efficient, runner
+    return (cap.reference_slam, cap.reference_predict, cap.reference_update,
+            cap.reference_augment, cap.reference_associate, dense.range_bearing_update,
+            dense.joseph_update, dense.augment_landmark, dense.DenseEkfSlam.predict,
+            dense.DenseEkfSlam.update, efficient.EkfSlam.update, runner.run)
+
+
+#: The capstone is the student's own filter: the course's filters and their steps are off
+#: limits (geometry, the gain, the Joseph covariance and association stay allowed).
+_FORBIDS = forbids(*_library_filters())
+
+
+@_FORBIDS
+def check_runs(my_slam, pieces=None, *, runs=RUNS, name: str = "my_slam",
+               quiet: bool = False) -> str:
+    """The loop runs on each of ``runs`` and returns a well-formed track (one finite pose
+    and symmetric positive semi-definite pose covariance per scan, a map with its joint
+    covariance)."""
+    for run in runs:
+        _result(my_slam, run, name, pieces)
+    return _done(f"✓ {name} ran on {len(runs)} simulated run(s) and returned a well-formed "
+                 f"track.", quiet)
+
+
+@_FORBIDS
+def check_consistency(my_slam, pieces=None, *, runs=RUNS, name: str = "my_slam",
+                      quiet: bool = False) -> str:
+    """The pose NEES averaged over the runs' scans within [0.75, 6] (3 dof) and each final
+    map's NEES per dof at most 3. ``pieces`` {'predict', 'update', 'augment'}: probed to
+    name the defect when this fails."""
+    scores = [cap.score_run(_result(my_slam, run, name, pieces), run) for run in runs]
+    nees = float(np.mean([s["nees_mean"] for s in scores]))
+    lo, hi = NEES_LIMITS
+    if not lo <= nees <= hi:
+        worst = max(scores, key=lambda s: s["nees_mean"])
+        side = "over-confident: its errors are larger than its covariance says" if nees > hi \
+            else "under-confident: its covariance is much larger than its errors"
+        fail(f"{name}'s pose NEES averages {nees:.3g} over {len(runs)} run(s) (a consistent "
+             f"filter: about 3; accepted {lo:g} to {hi:g}): {side}. Largest NEES "
+             f"{float(np.max(worst['nees'])):.3g} at scan {worst['worst_scan']} "
+             f"(t = {worst['worst_t']:.1f} s).{_cause(pieces)}")
+    for run, s in zip(runs, scores):
+        if not s["map_nees_per_dof"] <= MAP_NEES_LIMIT:      # NaN fails too
+            fail(f"{name}'s final map on {run!r} has NEES {s['map_nees_per_dof']:.3g} per dof over "
+                 f"its {s['matched']} landmarks matched to the truth (a consistent map: about 1; "
+                 f"accepted up to {MAP_NEES_LIMIT:g}): the map's covariance does not describe its "
+                 f"errors.{_cause(pieces)}")
+    return _done(f"✓ {name} is consistent on {len(runs)} run(s): mean pose NEES {nees:.2f} "
+                 f"(3 dof), map NEES per dof at most "
+                 f"{max(s['map_nees_per_dof'] for s in scores):.2f}.", quiet)
+
+
+@_FORBIDS
+def check_map(my_slam, pieces=None, *, runs=RUNS, name: str = "my_slam",
+              quiet: bool = False) -> str:
+    """Every true landmark mapped (within 1 m) and none twice, at most one spurious landmark
+    per run, the matched landmarks within 0.15 m RMS of the truth."""
+    for run in runs:
+        s = cap.score_run(_result(my_slam, run, name, pieces), run)
+        msg = None
+        if s["duplicates"]:
+            msg = (f"{s['duplicates']} landmark(s) mapped twice (two map entries within 1 m of one "
+                   f"true landmark): a detection that should have been associated started a new "
+                   f"landmark")
+        elif s["matched"] < s["true"]:
+            msg = f"only {s['matched']} of the {s['true']} true landmarks are on the map"
+        elif s["spurious"] > 1:
+            msg = f"{s['spurious']} landmarks are more than 1 m from every true one"
+        elif not s["map_rmse"] <= MAP_RMSE_LIMIT:
+            msg = (f"the mapped landmarks are {s['map_rmse']:.3f} m RMS from the truth (accepted "
+                   f"up to {MAP_RMSE_LIMIT:g} m)")
+        if msg:
+            fail(f"{name} on {run!r}: {msg}.{_cause(pieces)}")
+    return _done(f"✓ {name} mapped every landmark once on {len(runs)} run(s).", quiet)
+
+
+def score(my_slam, pieces=None, *, runs=RUNS, points=(1, 5, 2)) -> tuple[float, list[str]]:
+    """The points the three graded cells would give (runs, consistency, map) and the
+    messages of the failed ones: for the course's tests of broken loops."""
+    total, messages = 0.0, []
+    from .core import GradingError
+    for check, pts in zip((check_runs, check_consistency, check_map), points):
+        try:
+            check(my_slam, pieces, runs=runs, quiet=True)
+            total += pts
+        except GradingError as e:
+            messages.append(str(e))
+    return total, messages

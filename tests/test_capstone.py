@@ -1,0 +1,153 @@
+"""The capstone (chapter 09): the harness and the reference loop against the course's own
+filter, and the grading of whole loops: the notebook's loop and the reference get full
+marks on the hidden runs, the three typical broken loops (cross covariances not
+propagated, a wrong sign in F, an unwrapped bearing) score below half, each with a message
+that names its defect."""
+import math
+
+import numpy as np
+import pytest
+
+from annslam_lib.chapters import ch09_capstone as cap
+from annslam_lib.grading import capstone as gc
+from annslam_lib.grading.core import allowing_library_calls
+from annslam_lib.models.observation import observe
+from annslam_lib.slam import config, runner
+from annslam_lib.slam.dense import joseph_covariance, kalman_gain
+from solutions import solution
+
+HIDDEN = ("sim:4101:1", "sim:4102:1")          # the notebook's hidden runs
+FULL = 8.0
+
+
+def test_the_reference_loop_is_the_course_filter_on_the_car_park(car_park):
+    """Equal to a millimetre: the course's run also splits a prediction at every GPS fix
+    it skips, which moves the discretisation by a few tenths of a millimetre."""
+    mine = cap.reference_slam("car_park")
+    cfg = config.SlamConfig.for_dataset("car_park", gps_mode="none", motion_model="midpoint")
+    r = runner.run(car_park, cfg, progress=False, backend="dense")
+    np.testing.assert_allclose(mine["t"], r.trajectory[:, 0])
+    np.testing.assert_allclose(mine["pose"][:, :2], r.trajectory[:, 1:3], rtol=0, atol=1e-3)
+    np.testing.assert_allclose(mine["landmarks"], r.landmarks, rtol=0, atol=1e-3)
+
+
+def test_steps_hold_the_control_and_cover_the_run():
+    it = cap.steps("sim:3001:1")
+    start = next(it)
+    steps = list(it)
+    dts = [s.dt for s in steps if isinstance(s, cap.Predict)]
+    scans = [s for s in steps if isinstance(s, cap.Scan)]
+    ds = cap.dataset_of("sim:3001:1")
+    assert len(scans) == len(ds.detections)
+    end = max(ds.detections.t[-1], ds.odometry.t[-1])
+    assert sum(dts) == pytest.approx(end - ds.odometry.t[0], abs=1e-9)
+    assert start.P0.shape == (3, 3) and start.gate == pytest.approx(9.2103, abs=1e-4)
+
+
+def _no_cross_predict(x, P, u, dt, Q, vehicle):
+    x, P = np.array(x, float), np.array(P, float)
+    pose, F, G = cap.midpoint_step(x[:3], u, dt, vehicle)
+    x[:3] = pose
+    P[:3, :3] = F @ P[:3, :3] @ F.T + G @ Q @ G.T
+    return x, P
+
+
+def _sign_predict(x, P, u, dt, Q, vehicle):
+    x, P = np.array(x, float), np.array(P, float)
+    pose, F, G = cap.midpoint_step(x[:3], u, dt, vehicle)
+    F = F.copy()
+    F[:2, 2] *= -1
+    x[:3] = pose
+    P[:3, :] = F @ P[:3, :]
+    P[:, :3] = P[:, :3] @ F.T
+    P[:3, :3] += G @ Q @ G.T
+    return x, 0.5 * (P + P.T)
+
+
+def _no_wrap_update(x, P, z, idx, R):
+    z, idx = np.asarray(z, float).reshape(-1, 2), np.asarray(idx, int)
+    zhat, Hp, Hm = observe(x[:3], np.reshape(x[3:], (-1, 2))[idx])
+    H = np.zeros((2 * idx.size, len(x)))
+    for i, j in enumerate(idx):
+        H[2 * i:2 * i + 2, :3], H[2 * i:2 * i + 2, 3 + 2 * j:5 + 2 * j] = Hp[i], Hm[i]
+    Rm = np.kron(np.eye(idx.size), R)
+    K, _ = kalman_gain(P, H, Rm)
+    x = x + K @ (z - zhat).ravel()
+    x[2] = (x[2] + math.pi) % (2 * math.pi) - math.pi
+    return x, joseph_covariance(P, H, Rm, K)
+
+
+REF = {"predict": cap.reference_predict, "update": cap.reference_update,
+       "augment": cap.reference_augment}
+
+
+def _loop(**pieces):
+    def my_slam(run):
+        return cap.reference_slam(run, **pieces)
+    return my_slam
+
+
+def test_the_notebook_loop_gets_full_marks_on_the_hidden_runs():
+    nb = {k: solution("09", f"my_{k}") for k in ("predict", "update", "augment")}
+    assert gc.score(solution("09", "my_slam"), nb, runs=HIDDEN) == (FULL, [])
+    with allowing_library_calls():
+        assert gc.score(_loop(), REF, runs=HIDDEN) == (FULL, [])
+
+
+@pytest.mark.parametrize("broken, pieces, names", [
+    ("no cross covariance", {"predict": _no_cross_predict},
+     "does not propagate the cross covariances between the pose and the map"),
+    ("wrong Jacobian sign", {"predict": _sign_predict},
+     "heading column of my_predict's F has the wrong sign"),
+    ("no angle wrap", {"update": _no_wrap_update},
+     "does not wrap the bearing innovation"),
+])
+def test_a_broken_loop_scores_below_half_and_the_message_names_the_defect(broken, pieces, names):
+    with allowing_library_calls():
+        points, messages = gc.score(_loop(**pieces), {**REF, **pieces}, runs=HIDDEN)
+    assert points < FULL / 2, (broken, points)
+    assert messages and all(names in m for m in messages), messages
+
+
+def test_a_malformed_track_is_refused_with_what_is_wrong():
+    with pytest.raises(gc.GradingError if hasattr(gc, "GradingError") else AssertionError,
+                       match="must return track.result"):
+        gc.check_runs(lambda run: [1, 2, 3], quiet=True)
+    nan = {"t": [0.0], "pose": [[0.0, 0.0, np.nan]], "pose_cov": np.eye(3)[None],
+           "landmarks": np.zeros((0, 2)), "landmark_cov": np.zeros((0, 0))}
+    with pytest.raises(AssertionError, match="NaN or infinite"):
+        gc.check_runs(lambda run: nan, quiet=True)
+
+
+def test_the_library_filter_is_refused_in_a_student_loop():
+    def shortcut(run):
+        return cap.reference_slam(run)
+    shortcut.__name__ = "my_slam"
+    with pytest.raises(AssertionError, match="calls annslam_lib.chapters.ch09_capstone.reference_slam"):
+        gc.check_runs(shortcut, quiet=True)
+
+
+def test_the_course_grader_gives_an_honest_capstone_full_marks(tmp_path):
+    """Through the sandboxed grader: the student's loop runs in the kernel, the checks in
+    the grader, the hidden runs included."""
+    import nbformat
+
+    from annslam_lib.course import release
+    from annslam_lib.course.grader import grade_submission
+    from annslam_lib.course.sandbox import Limits
+    from solutions import ROOT
+
+    notebook = ROOT / "notebooks" / "09_capstone.ipynb"
+    inst = nbformat.read(notebook, as_version=4)
+    sub = release.student_version(inst, "09_capstone")
+    for c_inst, c_sub in zip(inst.cells, sub.cells):
+        if c_inst.metadata.get("nbgrader", {}).get("solution"):
+            c_sub.source = "\n".join(line for line in c_inst.source.splitlines()
+                                     if "### BEGIN SOLUTION" not in line
+                                     and "### END SOLUTION" not in line)
+    path = tmp_path / "09_capstone.ipynb"
+    nbformat.write(sub, path)
+    g = grade_submission(path, notebook, limits=Limits(cell_timeout=240.0, call_timeout=120.0,
+                                                       deadline=600.0))
+    assert (g.score, g.max_score) == (FULL, FULL), g.report()
+    assert g.errors == [], g.report()
