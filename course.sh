@@ -20,6 +20,14 @@
 set -euo pipefail
 cd "$(dirname "$0")"
 
+# Linux and macOS only (a Windows shell such as Git Bash or MSYS2 has no POSIX venv layout):
+# say so in one line and where to go instead. ANNSLAM_UNAME overrides uname (tests).
+case "${ANNSLAM_UNAME:-$(uname -s)}" in
+    Linux|Darwin) ;;
+    *) echo "annslam: ./course.sh runs on Linux and macOS, not on ${ANNSLAM_UNAME:-$(uname -s)}: use WSL 2, the class hub or the container (README, 'Windows and other laptops')" >&2
+       exit 2 ;;
+esac
+
 PY=${PYTHON:-python3}
 VENV=${ANNSLAM_VENV:-.venv}
 VPY="$VENV/bin/python"

@@ -1,4 +1,5 @@
 """The README stays true: its errata table is the library's, its commands exist."""
+import os
 import re
 import subprocess
 import sys
@@ -51,3 +52,13 @@ def test_notebook_links_point_to_existing_notebooks():
         text = "".join("".join(c["source"]) for c in cells if c["cell_type"] == "markdown")
         for target in re.findall(r"\]\(([0-9]{2}_[A-Za-z0-9_]+\.ipynb)", text):
             assert (ROOT / "notebooks" / target).exists(), f"{nb.name} links a missing {target}"
+
+
+def test_course_sh_refuses_an_unsupported_platform_in_one_line():
+    out = subprocess.run(["bash", str(ROOT / "course.sh"), "lab"], capture_output=True, text=True,
+                         env={**os.environ, "ANNSLAM_UNAME": "MINGW64_NT-10.0-19045"}, timeout=60)
+    assert out.returncode == 2 and out.stdout == ""
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and "not on MINGW64_NT-10.0-19045" in lines[0]
+    assert "WSL 2" in lines[0] and "Windows and other laptops" in lines[0]
+    assert "### Windows and other laptops" in README

@@ -9,6 +9,7 @@
     python -m annslam_lib release [--out student] [NOTEBOOK ...]   student versions (no solutions)
     python -m annslam_lib grade SUBMISSION ... [--json FILE]        grade submissions (sandboxed)
     python -m annslam_lib exercises                                the graded exercises per notebook
+    python -m annslam_lib pacing                                   estimated student time per chapter
     python -m annslam_lib workspace                                write/refresh your student copy
     python -m annslam_lib running --root DIR                       is a course server open on DIR?
     python -m annslam_lib hub --class FILE [--port P]              a JupyterHub for a class (root)
@@ -256,6 +257,19 @@ def _exercises(args: argparse.Namespace) -> int:
     return 0
 
 
+def _pacing(args: argparse.Namespace) -> int:
+    from .pacing import pacing_table
+
+    print(pacing_table(args.notebooks or _course_notebooks()))
+    return 0
+
+
+def _add_pacing(sub) -> None:
+    p = sub.add_parser("pacing", help="print the estimated student time per chapter (Markdown)")
+    p.add_argument("notebooks", nargs="*", metavar="NOTEBOOK")
+    p.set_defaults(func=_pacing)
+
+
 def _add_exercises(sub) -> None:
     p = sub.add_parser("exercises", help="print the autograded exercises per notebook (Markdown)")
     p.add_argument("notebooks", nargs="*", metavar="NOTEBOOK")
@@ -424,6 +438,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_release(sub)
     _add_grade(sub)
     _add_exercises(sub)
+    _add_pacing(sub)
     _add_workspace(sub)
     _add_running(sub)
     _add_hub(sub)

@@ -1,0 +1,46 @@
+"""INSTRUCTOR.md (issue 24) against the notebooks it describes: its pacing table is the one
+`python -m annslam_lib pacing` computes, every chapter has its prerequisites, every ungraded
+exercise its rubric, its links resolve, and the README's first screen links it."""
+import re
+from pathlib import Path
+
+from annslam_lib.course import pacing
+
+ROOT = Path(__file__).resolve().parents[1]
+GUIDE = (ROOT / "INSTRUCTOR.md").read_text()
+NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
+
+
+def test_the_pacing_table_is_computed_from_the_notebooks():
+    m = re.search(r"<!-- pacing:begin -->\n(.*?)\n<!-- pacing:end -->", GUIDE, re.S)
+    assert m, "INSTRUCTOR.md has no pacing table between its markers"
+    assert m.group(1).strip() == pacing.pacing_table(NOTEBOOKS).strip(), (
+        "INSTRUCTOR.md's pacing table is stale: paste the output of `python -m annslam_lib pacing`")
+
+
+def test_every_chapter_has_its_prerequisites_and_every_ungraded_exercise_a_rubric():
+    prereq = GUIDE.split("## Prerequisites", 1)[1].split("\n## ", 1)[0]
+    for nb in NOTEBOOKS:
+        assert f"| `{nb.stem}` |" in prereq, nb.stem
+    ungraded = [g for r in pacing.chapter_rows(NOTEBOOKS) for g in r["ungraded"]]
+    assert len(ungraded) >= 10
+    rubrics = GUIDE.split("## Rubrics", 1)[1].split("\n## ", 1)[0]
+    for gid in ungraded:
+        section = re.search(rf"### `{gid}`.*?\n(.*?)(?=\n### |\Z)", rubrics, re.S)
+        assert section and section.group(1).count("\n- ") >= 1, f"no rubric for {gid}"
+
+
+def test_links_resolve_and_the_readme_first_screen_links_the_guide():
+    for target in re.findall(r"\]\(([^)#]+)(?:#[^)]*)?\)", GUIDE):
+        if not target.startswith("http"):
+            assert (ROOT / target).exists(), target
+    first_screen = "\n".join((ROOT / "README.md").read_text().splitlines()[:30])
+    assert "(INSTRUCTOR.md)" in first_screen
+
+
+def test_the_estimate_follows_its_stated_assumptions():
+    rows = {r["notebook"]: r for r in pacing.chapter_rows(NOTEBOOKS)}
+    r = rows["01a_kalman_filter"]
+    assert r["points"] == 9 and r["ungraded"] == []
+    assert r["exercise_min"] == 5 * round(9 * pacing.MINUTES_PER_POINT / 5)
+    assert abs(r["reading_min"] - r["words"] / pacing.WORDS_PER_MINUTE) <= 2.5
