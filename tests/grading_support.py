@@ -127,3 +127,34 @@ def marked_kernel_client():
 
 
 MarkedKernelClient = marked_kernel_client()
+
+
+# ------------------------------------------------------------- a real chapter, graded
+
+def solution_bodies(notebook) -> dict:
+    """{grade id: source} of an instructor notebook's solution cells, markers removed: the
+    honest submission of that chapter."""
+    out = {}
+    for c in nbformat.read(notebook, as_version=4).cells:
+        m = c.metadata.get("nbgrader", {})
+        if m.get("solution"):
+            out[m["grade_id"]] = "\n".join(line for line in c.source.splitlines()
+                                           if "### BEGIN SOLUTION" not in line
+                                           and "### END SOLUTION" not in line)
+    return out
+
+
+def grade_chapter(notebook, bodies: dict, folder, limits):
+    """The released version of ``notebook`` with the solution cells ``bodies`` {grade id:
+    source} filled in (the others left as stubs), written under ``folder`` and graded by
+    the course's grader against ``notebook``."""
+    from annslam_lib.course.grader import grade_submission
+
+    nb = release.student_version(nbformat.read(notebook, as_version=4), notebook.stem)
+    for c in nb.cells:
+        gid = c.metadata.get("nbgrader", {}).get("grade_id")
+        if gid in bodies:
+            c.source = bodies[gid]
+    path = folder / notebook.name
+    write(nb, path)
+    return grade_submission(path, notebook, limits=limits)

@@ -4,17 +4,16 @@ each with the message a student gets; then real submissions of the chapter grade
 course's grader, with their scores."""
 import math
 
-import nbformat
 import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from annslam_lib.course import release
-from annslam_lib.course.grader import grade_submission
 from annslam_lib.course.sandbox import Limits
 from annslam_lib.grading import GradingError
 from annslam_lib.grading import kalman as gk
 from solutions import ROOT, solution
+
+import grading_support as gs
 
 NOTEBOOK = ROOT / "notebooks" / "01a_kalman_filter.ipynb"
 
@@ -196,29 +195,6 @@ def test_gate_partial_right_for_scalar_innovations_only():
 
 # ----------------------------------------------------------------------------- the grader
 
-def _submission(bodies: dict) -> nbformat.NotebookNode:
-    """The released chapter with the named solution cells filled in (others left as stubs)."""
-    nb = release.student_version(nbformat.read(NOTEBOOK, as_version=4), "01a_kalman_filter")
-    for c in nb.cells:
-        gid = c.metadata.get("nbgrader", {}).get("grade_id")
-        if gid in bodies:
-            c.source = bodies[gid]
-    return nb
-
-
-
-def _instructor_bodies() -> dict:
-    nb = nbformat.read(NOTEBOOK, as_version=4)
-    out = {}
-    for c in nb.cells:
-        m = c.metadata.get("nbgrader", {})
-        if m.get("solution"):
-            out[m["grade_id"]] = "\n".join(line for line in c.source.splitlines()
-                                           if "### BEGIN SOLUTION" not in line
-                                           and "### END SOLUTION" not in line)
-    return out
-
-
 MIXED = {
     # 1a.1 honest; 1a.2 the prior's variance; 1a.3 right for m = 1 only; 1a.4 two dof always
     "ex01a-steady-state": "def my_steady_state(q, r):\n"
@@ -231,14 +207,10 @@ MIXED = {
 
 
 def test_the_grader_scores_honest_and_mixed_submissions_of_the_chapter(tmp_path):
-    bodies = _instructor_bodies()
+    bodies = gs.solution_bodies(NOTEBOOK)
     limits = Limits(cell_timeout=60.0, call_timeout=20.0, deadline=240.0)
-    results = {}
-    for name, sub in [("honest", bodies), ("mixed", {**bodies, **MIXED})]:
-        path = tmp_path / name / "01a_kalman_filter.ipynb"
-        path.parent.mkdir()
-        nbformat.write(_submission(sub), path)
-        results[name] = grade_submission(path, NOTEBOOK, limits=limits)
+    results = {name: gs.grade_chapter(NOTEBOOK, sub, tmp_path / name, limits)
+               for name, sub in [("honest", bodies), ("mixed", {**bodies, **MIXED})]}
     honest, mixed = results["honest"], results["mixed"]
     assert (honest.score, honest.max_score) == (9, 9), honest.report()
     assert honest.errors == [], honest.report()

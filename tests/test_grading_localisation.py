@@ -4,18 +4,17 @@ mistakes with the messages a student gets; then real submissions of the chapter 
 the course's grader, with their scores."""
 import math
 
-import nbformat
 import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from annslam_lib.course import release
-from annslam_lib.course.grader import grade_submission
 from annslam_lib.course.sandbox import Limits
 from annslam_lib.grading import GradingError
 from annslam_lib.grading import localisation as gl
 from annslam_lib.models.observation import observe
 from solutions import ROOT, solution
+
+import grading_support as gs
 
 NOTEBOOK = ROOT / "notebooks" / "04a_ekf_localisation.ipynb"
 
@@ -124,17 +123,6 @@ def test_nis_verdict_partial_right_only_when_every_update_has_two_dof():
 
 # ----------------------------------------------------------------------------- the grader
 
-def _instructor_bodies() -> dict:
-    out = {}
-    for c in nbformat.read(NOTEBOOK, as_version=4).cells:
-        m = c.metadata.get("nbgrader", {})
-        if m.get("solution"):
-            out[m["grade_id"]] = "\n".join(line for line in c.source.splitlines()
-                                           if "### BEGIN SOLUTION" not in line
-                                           and "### END SOLUTION" not in line)
-    return out
-
-
 MIXED = {   # 4a.1 without the bearing wrap; 4a.2 honest
     "ex04a-beacon-update": "def my_beacon_update(pose, P, z, beacon, R):\n"
                            "    zhat, H, _ = observe(np.asarray(pose, float), np.asarray(beacon, float))\n"
@@ -147,19 +135,10 @@ MIXED = {   # 4a.1 without the bearing wrap; 4a.2 honest
 
 
 def test_the_grader_scores_honest_and_mixed_submissions_of_the_chapter(tmp_path):
-    bodies = _instructor_bodies()
+    bodies = gs.solution_bodies(NOTEBOOK)
     limits = Limits(cell_timeout=120.0, call_timeout=30.0, deadline=400.0)
-    results = {}
-    for name, sub in [("honest", bodies), ("mixed", {**bodies, **MIXED})]:
-        nb = release.student_version(nbformat.read(NOTEBOOK, as_version=4), "04a_ekf_localisation")
-        for c in nb.cells:
-            gid = c.metadata.get("nbgrader", {}).get("grade_id")
-            if gid in sub:
-                c.source = sub[gid]
-        path = tmp_path / name / "04a_ekf_localisation.ipynb"
-        path.parent.mkdir()
-        nbformat.write(nb, path)
-        results[name] = grade_submission(path, NOTEBOOK, limits=limits)
+    results = {name: gs.grade_chapter(NOTEBOOK, sub, tmp_path / name, limits)
+               for name, sub in [("honest", bodies), ("mixed", {**bodies, **MIXED})]}
     honest, mixed = results["honest"], results["mixed"]
     assert (honest.score, honest.max_score) == (5, 5), honest.report()
     assert honest.errors == [], honest.report()
