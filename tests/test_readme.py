@@ -50,7 +50,7 @@ def test_notebook_links_point_to_existing_notebooks():
     for nb in sorted((ROOT / "notebooks").glob("*.ipynb")):
         cells = json.loads(nb.read_text())["cells"]
         text = "".join("".join(c["source"]) for c in cells if c["cell_type"] == "markdown")
-        for target in re.findall(r"\]\(([0-9]{2}_[A-Za-z0-9_]+\.ipynb)", text):
+        for target in re.findall(r"\]\(([0-9]{2}[a-z]?_[A-Za-z0-9_]+\.ipynb)", text):
             assert (ROOT / "notebooks" / target).exists(), f"{nb.name} links a missing {target}"
 
 

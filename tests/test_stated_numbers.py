@@ -16,10 +16,10 @@ import pytest
 from stated_numbers import Stated, _text, evidence, is_evidenced, printed_numbers, stated_numbers
 
 ROOT = Path(__file__).resolve().parents[1]
-NOTEBOOKS = sorted((ROOT / "notebooks").glob("[0-9][0-9]_*.ipynb"))
+NOTEBOOKS = sorted(p for p in (ROOT / "notebooks").glob("*.ipynb") if re.match(r"\d\d[a-z]?_", p.name))
 DECLARED = tomllib.loads((Path(__file__).with_name("stated_numbers.toml")).read_text())
 KINDS = ("data", "constant", "parameter", "theory", "arithmetic", "paper", "example")
-PRINTED_IN = re.compile(r"printed in (?:chapter (\d\d) )?cell (\d+)$")
+PRINTED_IN = re.compile(r"printed in (?:chapter (\d\d[a-z]?) )?cell (\d+)$")
 
 
 def _key(s: Stated) -> str:
@@ -27,7 +27,7 @@ def _key(s: Stated) -> str:
 
 
 def _cell_outputs(chapter: str, cell: int) -> set[str]:
-    path = next(p for p in NOTEBOOKS if p.name.startswith(chapter))
+    path = next(p for p in NOTEBOOKS if p.stem == chapter or p.name.startswith(chapter + "_"))
     c = nbformat.read(path, as_version=4).cells[cell]
     assert c.cell_type == "code", f"{path.name} cell {cell} is not a code cell"
     return set().union(*(printed_numbers(_text(o)) for o in c.outputs))
@@ -50,7 +50,7 @@ def test_every_stated_number_is_evidenced_or_declared(path):
         used.add(_key(s))
         m = PRINTED_IN.match(why)
         if m:
-            where = _cell_outputs(m.group(1) or path.name[:2], int(m.group(2)))
+            where = _cell_outputs(m.group(1) or path.stem, int(m.group(2)))
             if not is_evidenced(s, where):
                 problems.append(f"cell {s.cell}: {_key(s)} is declared '{why}', but that cell "
                                 f"does not print it")
@@ -110,7 +110,7 @@ def test_evidence_is_looked_for_in_the_section_not_the_whole_notebook():
     ("05", "1.074", "1.064"),                                        # a band edge, digit by digit
 ])
 def test_the_errors_the_audit_found_would_be_caught(chapter, old, new):
-    path = next(p for p in NOTEBOOKS if p.name.startswith(chapter))
+    path = next(p for p in NOTEBOOKS if p.stem == chapter or p.name.startswith(chapter + "_"))
     nb = nbformat.read(path, as_version=4)
     assert any(old in c.source for c in nb.cells if c.cell_type == "markdown")
     before = _unevidenced(nb)

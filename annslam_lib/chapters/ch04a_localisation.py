@@ -24,7 +24,7 @@ from ..slam.dead_reckoning import dead_reckon
 from ..slam.results import STATUS
 from ..slam.runner import run
 
-__all__ = ["setup", "compare", "COMPARED", "paths_figure", "errors_figure",
+__all__ = ["setup", "compare", "COMPARED", "paths_figure",
            "moved_beacon_sweep", "moved_beacon_figure", "missing_beacon", "state_at",
            "wrong_association", "map_error_summary", "map_error_explorer", "EXPLORER_FIGSIZE"]
 
@@ -85,33 +85,26 @@ def compare(car: Dataset) -> list[dict]:
 
 
 def paths_figure(car: Dataset, rows: list[dict]):
-    """GPS, SLAM and localisation without GPS, and the surveyed beacons."""
-    fig, ax = figure(height=5.5)
+    """Left: GPS, SLAM and localisation without GPS, and the surveyed beacons. Right: the
+    position error against GPS along the run, every run of :func:`compare` but dead
+    reckoning (off the scale: its RMSE is in the table)."""
+    fig, (ax, ax1) = figure(1, 2, height=5.2, width_ratios=[1, 1.6])
     ax.plot(*car.gps.xy.T, ".", color="0.6", ms=2, label="GPS")
     by = {r["label"]: r for r in rows}
     for label, color in [("SLAM, no GPS", "tab:orange"), ("localisation, no GPS", "tab:blue")]:
         tr = by[label]["result"].odometry_trajectory
-        ax.plot(tr[:, 1], tr[:, 2], color=color, lw=1.2,
-                label=f"{label}: RMSE {by[label]['traj_rmse']:.2f} m")
-    ax.plot(*car.beacons.T, "k^", ms=7, label="surveyed beacons (the known map)")
-    ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal",
-           title="the same run, the map known or built")
-    ax.legend(fontsize=8, loc="lower right")
+        ax.plot(tr[:, 1], tr[:, 2], color=color, lw=1.2, label=label)
+    ax.plot(*car.beacons.T, "k^", ms=7, label="surveyed beacons")
+    ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal", title="the map known or built")
+    ax.legend(fontsize=7, loc="lower right")
     ax.grid(True, alpha=0.3)
-    return fig
-
-
-def errors_figure(rows: list[dict]):
-    """Position error against GPS over time, every run of :func:`compare` but dead
-    reckoning (off the scale: its RMSE is in the table)."""
-    fig, ax = figure(height=3.4)
     for r in rows[1:]:
         e = r["errors"]
-        ax.plot(e.t, e.error, lw=1, label=r["label"])
-    ax.set(xlabel="time [s]", ylabel="error against GPS [m]", yscale="log",
-           title="position error along the run")
-    ax.legend(fontsize=8, ncol=2)
-    ax.grid(True, alpha=0.3, which="both")
+        ax1.plot(e.t, e.error, lw=1, label=r["label"])
+    ax1.set(xlabel="time [s]", ylabel="error against GPS [m]", yscale="log",
+            title="position error along the run")
+    ax1.legend(fontsize=7, ncol=2, loc="lower right")
+    ax1.grid(True, alpha=0.3, which="both")
     return fig
 
 

@@ -265,8 +265,9 @@ def reference_slam(run: str, predict=reference_predict, associate_=reference_ass
 
 
 def track_figure(result: dict, truth_xy=None, beacons=None):
-    """The loop's path and map, with the truth where there is one."""
-    fig, ax = figure(height=5.0)
+    """The loop's path and map, with the truth where there is one (left), and its position
+    uncertainty along the run (right)."""
+    fig, (ax, ax1) = figure(1, 2, height=4.6, width_ratios=[1, 1.3])
     if truth_xy is not None:
         ax.plot(*np.asarray(truth_xy).T, color="0.6", lw=1, label="truth")
     ax.plot(result["pose"][:, 0], result["pose"][:, 1], color="tab:blue", lw=1, label="your filter")
@@ -277,4 +278,8 @@ def track_figure(result: dict, truth_xy=None, beacons=None):
     ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal")
     ax.legend(fontsize=8)
     ax.grid(True, alpha=0.3)
+    sigma = np.sqrt(result["pose_cov"][:, 0, 0] + result["pose_cov"][:, 1, 1])
+    ax1.plot(result["t"], sigma, color="tab:blue")
+    ax1.set(xlabel="time [s]", ylabel="sqrt(P_xx + P_yy) [m]", title="your filter's position uncertainty")
+    ax1.grid(True, alpha=0.3)
     return fig
