@@ -133,7 +133,7 @@ def main(argv=None) -> int:
                    help="also Run All a second time with the study cache the first run filled")
     args = p.parse_args(argv)
     paths = [q for q in sorted((ROOT / "notebooks").glob("*.ipynb"))
-             if not args.only or q.name[:2] in args.only]
+             if not args.only or q.name.split("_")[0] in args.only]
     tmp = Path(tempfile.mkdtemp(prefix="bench-nb-"))
     trees = {"now": (ROOT, None)}
     if args.against:
@@ -203,9 +203,9 @@ def markdown_table(results: dict) -> str:
             vals = [r[kind]["cpu"] for r in (ins, stu) if kind in r]
             return " / ".join(f"{v:.1f}" for v in vals) if vals else "not measured"
         steps = [w["step"] for r in (ins, stu) if "now" in r for w in r["now"]["widgets"]]
-        rows.append(f"| {stem[:2]} | {pair('now')} | {pair('warm')} | "
+        rows.append(f"| {stem.split('_')[0]} | {pair('now')} | {pair('warm')} | "
                     f"{max(steps):.2f} |" if steps else
-                    f"| {stem[:2]} | {pair('now')} | {pair('warm')} | no widget |")
+                    f"| {stem.split('_')[0]} | {pair('now')} | {pair('warm')} | no widget |")
     return "\n".join(rows)
 
 
