@@ -206,12 +206,12 @@ def _step_here(widget, readout: str):
     return holder.get("text", buf.getvalue()).strip()
 
 
-_NOT_TEXT = re.compile(r"^(Figure\(\d+x\d+\)|<Figure size .*>)$")
+_NOT_TEXT = re.compile(r"^(Figure\(\d+x\d+\)|<Figure size .*>|<IPython\.core\.display\.Image object>)$")
 
 
 def _pre_texts(text: str) -> str:
     """The printed lines, without what only a terminal sees: clear_output's escape codes and
-    the repr a figure prints where it cannot be displayed."""
+    the repr a figure (or its PNG) prints where it cannot be displayed."""
     text = text.replace("\x1b[2K", "").replace("\r", "")
     return "\n".join(line.strip() for line in text.strip().split("\n")
                      if line.strip() and not _NOT_TEXT.match(line.strip()))

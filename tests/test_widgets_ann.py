@@ -10,6 +10,7 @@ import pytest
 from annslam_lib import ann
 from annslam_lib.ann import evaluation
 from annslam_lib.chapters import ch07_ann_training as ch07
+from layout_support import assert_kept_layouts_clear  # noqa: E402
 
 
 
@@ -135,3 +136,8 @@ def test_bad_input(ts, grid):
         evaluation.hidden_size_grid(np.zeros((3, 12)))
     with pytest.raises(TypeError, match="TrainConfig"):
         evaluation.hidden_size_grid(ts, config={"hidden": (3,)})
+
+
+def test_kept_layout_stays_clear_at_the_controls_ends(grid):
+    # plots.style.render_png draws later steps at the first step's layout (tests/layout_support.py)
+    assert_kept_layouts_clear(lambda: ch07.hidden_size_explorer(grid[0], hidden=1, seed=0))

@@ -16,6 +16,7 @@ from annslam_lib.chapters import ch00_course_map as ch00
 from annslam_lib.data import fetch
 from annslam_lib.data import simulate
 from annslam_lib.plots import data as data_plots
+from layout_support import assert_kept_layouts_clear  # noqa: E402
 
 READOUT = re.compile(r"scan (\d+)  t = ([\d.]+) s  returns (\d+)  bright beams (\d+)"
                      r"(?: \(([\d.]+)-([\d.]+) m\))?")
@@ -104,3 +105,8 @@ def test_scan_plot_puts_tape_returns_in_the_vehicle_frame():
     world = np.column_stack([x + c * laser_xy[:, 0] - s * laser_xy[:, 1], y + s * laser_xy[:, 0] + c * laser_xy[:, 1]])
     assert np.all(np.hypot(*(world - ds.beacons[0]).T) <= 0.1 + 1e-9)  # on the pole's surface (radius 0.1 m)
     plt.close("all")
+
+
+def test_kept_layout_stays_clear_at_the_controls_ends(car_park):
+    # plots.style.render_png draws later steps at the first step's layout (tests/layout_support.py)
+    assert_kept_layouts_clear(lambda: ch00.scan_scrubber(car_park, start=10))

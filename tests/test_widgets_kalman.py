@@ -8,6 +8,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from annslam_lib.chapters import ch01a_kalman_filter as ch  # noqa: E402
+from layout_support import assert_kept_layouts_clear  # noqa: E402
 
 
 @pytest.fixture(autouse=True)
@@ -53,3 +54,8 @@ def test_the_figure_draws_the_three_densities():
     assert labels == ["prior", "measurement", "posterior"]
     peak = ax.get_lines()[2].get_xydata()
     assert peak[np.argmax(peak[:, 1]), 0] == pytest.approx(s["mu_post"], abs=0.03)
+
+
+def test_kept_layout_stays_clear_at_the_controls_ends():
+    # plots.style.render_png draws later steps at the first step's layout (tests/layout_support.py)
+    assert_kept_layouts_clear(lambda: ch.update_explorer(mu=12.0, var=0.34, z=12.4, r=0.16))

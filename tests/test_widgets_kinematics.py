@@ -8,6 +8,7 @@ import pytest
 
 from annslam_lib.models.vehicle import ACFR_UTE, Vehicle
 from annslam_lib.chapters import ch01_kinematics as ch01
+from layout_support import assert_kept_layouts_clear  # noqa: E402
 
 
 matplotlib.use("Agg")
@@ -114,3 +115,8 @@ def test_kinematics_explorer_prints_the_readout_of_its_summary(capsys):
     assert f"laser {100 * s['error_laser']:.1f} cm" in line
     w.children[1].value = 0.0                          # straight ahead
     assert "straight ahead" in w.holder["text"] and "rear axle 0.0 cm" in w.holder["text"]
+
+
+def test_kept_layout_stays_clear_at_the_controls_ends():
+    # plots.style.render_png draws later steps at the first step's layout (tests/layout_support.py)
+    assert_kept_layouts_clear(lambda: ch01.kinematics_explorer(speed=2.0, steering=0.3, dt=0.2))

@@ -15,6 +15,7 @@ from annslam_lib.chapters import ch04_landmarks as ch04
 from annslam_lib.data import simulate
 from annslam_lib.perception import beacons
 from annslam_lib.perception import sources
+from layout_support import assert_kept_layouts_clear  # noqa: E402
   # noqa: E402
 
 
@@ -131,3 +132,9 @@ def test_scrubber_summary_follows_the_scan_slider(car_park):
         s = w.holder["summary"]
         assert s["scan"] == k and s["t"] == pytest.approx(car_park.laser.t[k])
         np.testing.assert_array_equal(s["z"], det[k])
+
+
+def test_kept_layout_stays_clear_at_the_controls_ends(car_park):
+    # plots.style.render_png draws later steps at the first step's layout (tests/layout_support.py)
+    assert_kept_layouts_clear(lambda: ch04.beacon_scrubber(car_park, start=150))
+    assert_kept_layouts_clear(lambda: ch04.gate_explorer())

@@ -10,6 +10,7 @@ import pytest  # noqa: E402
 from annslam_lib.chapters import ch04a_localisation as ch  # noqa: E402
 from annslam_lib.evaluation.trajectory import trajectory_errors  # noqa: E402
 from annslam_lib.slam import localisation  # noqa: E402
+from layout_support import assert_kept_layouts_clear  # noqa: E402
 
 
 @pytest.fixture(autouse=True)
@@ -49,3 +50,8 @@ def test_a_setting_seen_before_is_not_run_again(car_park):
 def test_bad_beacon_index_is_refused(car_park):
     with pytest.raises(ValueError, match="beacon"):
         ch.map_error_summary(car_park, 15, 0.1)
+
+
+def test_kept_layout_stays_clear_at_the_controls_ends(car_park):
+    # plots.style.render_png draws later steps at the first step's layout (tests/layout_support.py)
+    assert_kept_layouts_clear(lambda: ch.map_error_explorer(car_park, beacon=12, shift=0.0))

@@ -10,6 +10,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from annslam_lib.chapters import ch03_observation as ch03
+from layout_support import assert_kept_layouts_clear  # noqa: E402
 
   # noqa: E402
 
@@ -140,3 +141,8 @@ def test_landmark_sigma_slider_adds_its_variance_through_H_m():
     assert s1["range"] == pytest.approx(10.0)
     dS = s1["S"] - s0["S"]
     np.testing.assert_allclose(dS, np.diag([0.25, 0.25 / 100.0]), atol=1e-12)
+
+
+def test_kept_layout_stays_clear_at_the_controls_ends():
+    # plots.style.render_png draws later steps at the first step's layout (tests/layout_support.py)
+    assert_kept_layouts_clear(lambda: ch03.measurement_explorer(landmark=(10.0, 3.0), sigma_xy=0.3, sigma_phi_deg=5.0))

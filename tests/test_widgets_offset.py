@@ -15,6 +15,7 @@ from annslam_lib.data.records import Gps  # noqa: E402
 from annslam_lib.models.vehicle import ACFR_UTE, Vehicle  # noqa: E402
 from annslam_lib.chapters import ch02_laser_offset as ch02
 from annslam_lib.data import simulate
+from layout_support import assert_kept_layouts_clear  # noqa: E402
   # noqa: E402
 
 
@@ -167,3 +168,8 @@ def test_bad_input_is_rejected(car_park, turn):
         ch02.offset_paths(turn, np.nan, 0.5)
     with pytest.raises(ValueError, match="offset b must be finite"):
         ch02.offset_summary(turn, 3.78, np.inf)
+
+
+def test_kept_layout_stays_clear_at_the_controls_ends(car_park):
+    # plots.style.render_png draws later steps at the first step's layout (tests/layout_support.py)
+    assert_kept_layouts_clear(lambda: ch02.offset_explorer(car_park))

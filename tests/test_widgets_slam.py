@@ -20,6 +20,7 @@ from annslam_lib.evaluation import consistency
 from annslam_lib.evaluation import map as map_eval
 from annslam_lib.evaluation import trajectory
 from annslam_lib.slam import runner
+from layout_support import assert_kept_layouts_clear  # noqa: E402
   # noqa: E402
 
 
@@ -126,3 +127,8 @@ def test_explorer_follows_its_sliders(car_park, full_run):
         (0.3, math.radians(3.0), math.radians(2.0)))
     assert "NIS/dof" in w.holder["text"]
     plt.close("all")
+
+
+def test_kept_layout_stays_clear_at_the_controls_ends(car_park):
+    # plots.style.render_png draws later steps at the first step's layout (tests/layout_support.py)
+    assert_kept_layouts_clear(lambda: ch05.slam_explorer(car_park, t_end=40.0), only=(0, 1, 5))

@@ -20,6 +20,7 @@ from annslam_lib.evaluation import map as map_eval
 from annslam_lib.paper import study
 from annslam_lib.plots import paper as paper_plots
 from annslam_lib.slam import runner
+from layout_support import assert_kept_layouts_clear  # noqa: E402
   # noqa: E402
 
 SCALES = (0.3, 1.0, 3.0)
@@ -151,3 +152,8 @@ def test_bad_input(car_park, sweep):
         paper_plots.plot_r_scale(sweep, 0.5)
     with pytest.raises(ValueError, match="dataset or a precomputed sweep"):
         ch08.r_scale_explorer()
+
+
+def test_kept_layout_stays_clear_at_the_controls_ends(sweep):
+    # plots.style.render_png draws later steps at the first step's layout (tests/layout_support.py)
+    assert_kept_layouts_clear(lambda: ch08.r_scale_explorer(sweep=sweep, reference=None, scale=1.0))

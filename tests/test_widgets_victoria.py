@@ -20,6 +20,7 @@ from annslam_lib.models import geometry
 from annslam_lib.models import uncertainty
 from annslam_lib.slam import config as slam_config
 from annslam_lib.slam import runner
+from layout_support import assert_kept_layouts_clear  # noqa: E402
   # noqa: E402
 
 
@@ -180,3 +181,8 @@ def test_bad_input_is_a_clear_error(sim_run):
         ch06.run_scrubber(r, gps, outliers=np.zeros(3, bool))
     with pytest.raises(ValueError, match="3 means but 2"):
         uncertainty.ellipse_curves(np.zeros((3, 2)), np.zeros((2, 2, 2)))
+
+
+def test_kept_layout_stays_clear_at_the_controls_ends(sim_run):
+    # plots.style.render_png draws later steps at the first step's layout (tests/layout_support.py)
+    assert_kept_layouts_clear(lambda: ch06.run_scrubber(sim_run[1], sim_run[2], start=12, step=1))

@@ -256,10 +256,19 @@ def offset_explorer(ds: Dataset, t0: float = TURN[0], t1: float = TURN[1]):
     in ``widget.holder["summary"]`` (and the paths in ``holder["paths"]``)."""
     stretch = car_park_stretch(ds, t0, t1)
     holder = {"stretch": stretch}
+    v = ds.vehicle
+    # One map view for every offset (the nominal one's, with room): the laser path moves in
+    # a still frame, and the figure keeps one layout (plots.style.render_png).
+    p0 = offset_paths(stretch, v.a, v.b)
+    pts = np.vstack([p0["axle"][:, :2], p0["laser"][:, :2], stretch.gps_xy])
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    pad = 0.15 * (hi - lo).max()
+    view = dict(xlim=(lo[0] - pad, hi[0] + pad), ylim=(lo[1] - pad, hi[1] + pad))
 
     def draw(a: float, b: float, align: bool) -> None:
         fig, axes = widget_figure(1, 2, **STRETCH_LAYOUT)  # not pyplot: see widget_figure
         s = plot_offset_stretch(stretch, a, b, align=align, axes=axes)
+        axes[0].set(**view)
         holder["summary"] = s
         holder["paths"] = offset_paths(stretch, a, b, align=align)
         print(f"a = {a:.2f} m, b = {b:.2f} m: laser path to GPS RMS {s['rms']:.3f} m, "
@@ -267,7 +276,6 @@ def offset_explorer(ds: Dataset, t0: float = TURN[0], t1: float = TURN[1]):
               f"{s['heading_correction_deg']:.2f} deg")
         show_widget_figure(fig)
 
-    v = ds.vehicle
     widget = interactive(
         draw,
         a=FloatSlider(value=v.a, min=-1.0, max=6.0, step=0.01, description="a [m]",

@@ -215,6 +215,17 @@ def gate_explorer(*, prob: float = 0.99, new_prob: float = 0.9999):
     d2 = mahalanobis(scene["z"], scene["zhat"], scene["S"])
     holder = {}
     new = gate_threshold(new_prob)
+    options = [0.5, 0.9, 0.95, 0.99, 0.999, 0.9999, 0.999999]
+    # One view for every gate (that of the widest): the gates grow and shrink in place,
+    # and the figure keeps one layout (plots.style.render_png).
+    deg = np.diag([180.0 / math.pi, 1.0])
+    widest = math.sqrt(gate_threshold(max(options)))
+    pts = np.vstack([ellipse_points(np.array([math.degrees(m[1]), m[0]]), deg @ Sj[::-1, ::-1] @ deg,
+                                    widest) for m, Sj in zip(scene["zhat"], scene["S"])]
+                    + [np.column_stack([np.degrees(scene["z"][:, 1]), scene["z"][:, 0]])])
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    pad = 0.08 * (hi - lo)
+    view = dict(xlim=(lo[0] - pad[0], hi[0] + 2 * pad[0]), ylim=(lo[1] - pad[1], hi[1] + pad[1]))
 
     def draw(prob: float) -> None:
         g = gate_threshold(prob)
@@ -225,9 +236,9 @@ def gate_explorer(*, prob: float = 0.99, new_prob: float = 0.9999):
         fig, ax = widget_figure(figsize=(7, 5))  # not pyplot: see widget_figure
         draw_gates(ax, scene["zhat"], scene["S"], scene["z"], a, gate=g,
                    title=f"{100 * prob:g} % gates")
+        ax.set(**view)
         show_widget_figure(fig)
 
-    options = [0.5, 0.9, 0.95, 0.99, 0.999, 0.9999, 0.999999]
     if prob not in options:
         raise ValueError(f"prob must be one of {options}, got {prob!r}")
     widget = interactive(draw, prob=SelectionSlider(options=options, value=prob,

@@ -15,7 +15,6 @@ fit looks ahead ``initial_window`` seconds, so fitting it on a cut run would cha
 from __future__ import annotations
 
 import html
-import io
 import math
 
 import numpy as np
@@ -28,7 +27,7 @@ from ..evaluation.summary import pose_trace, run_metrics
 from ..evaluation.trajectory import trajectory_errors
 from ..plots.slam import (CAR_PARK_LIMITS, plot_consistency, plot_correlation,
                           plot_landmark_zooms, plot_true_vs_mapped)
-from ..plots.style import DPI, FIG_WIDTH, figure
+from ..plots.style import DPI, FIG_WIDTH, figure, render_png
 from ..plots.style import notebook_setup as setup
 from ..slam.config import SlamConfig
 from ..slam.dead_reckoning import initial_pose_from_gps
@@ -117,9 +116,7 @@ def _render(summary: dict, limits, ellipse_scale: float) -> bytes:
     (a matplotlib Figure, not pyplot: nothing is displayed as a side effect)."""
     fig = Figure(figsize=EXPLORER_FIGSIZE, dpi=DPI, layout="constrained")
     _draw_summary(fig, summary, limits, ellipse_scale)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=DPI)
-    return buf.getvalue()
+    return render_png(fig)
 
 
 def slam_explorer(dataset: Dataset, config: SlamConfig | None = None, *,

@@ -15,7 +15,6 @@ improve.
 from __future__ import annotations
 
 import html
-import io
 import math
 
 from ipywidgets import HTML, Image, Layout, SelectionSlider, VBox
@@ -25,7 +24,7 @@ from ..data.records import Dataset
 from ..paper.study import SCALES, FoldStudy, Study, r_scale_sweep
 from ..plots.paper import plot_pose_trace, plot_r_scale, plot_transfer
 from ..plots.slam import CAR_PARK_LIMITS, plot_true_vs_mapped
-from ..plots.style import DPI, FIG_WIDTH, figure
+from ..plots.style import DPI, FIG_WIDTH, figure, render_png
 from ..plots.style import notebook_setup as setup
 from ..slam.config import SlamConfig
 
@@ -106,9 +105,7 @@ def _render(sweep: dict, scale: float, reference: dict | None) -> bytes:
     side effect)."""
     fig = Figure(figsize=EXPLORER_FIGSIZE, dpi=DPI)
     plot_r_scale(sweep, scale, reference, fig=fig)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=DPI)
-    return buf.getvalue()
+    return render_png(fig)
 
 
 def r_scale_explorer(dataset: Dataset | None = None, *, sweep: dict | None = None,

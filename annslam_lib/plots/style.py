@@ -8,11 +8,14 @@ one from :func:`axes`) and returns it, so a notebook cell stays one line.
 """
 from __future__ import annotations
 
+import io
+
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.figure import Figure
 
-__all__ = ["notebook_setup", "axes", "figure", "widget_figure", "show_widget_figure",
+__all__ = ["notebook_setup", "axes", "figure", "widget_figure", "show_widget_figure", "render_png",
+           "layout_signature",
            "BEACON_STYLE", "FIG_WIDTH", "DPI"]
 
 #: Width of a full-width figure (inches) and the resolution of the notebook's images: a
@@ -38,14 +41,103 @@ def widget_figure(nrows: int = 1, ncols: int = 1, *, figsize, layout=None, **sub
 
 
 def show_widget_figure(fig: Figure) -> None:
-    """Display a :func:`widget_figure` in the callback's Output (instead of ``plt.show()``).
+    """Display a :func:`widget_figure` in the callback's Output (instead of ``plt.show()``),
+    as the PNG of :func:`render_png`.
 
     Explicit display, because no pyplot flush knows about the figure; nothing else can show
     it early from another thread, which is the point (see :func:`widget_figure`)."""
-    from IPython.display import display  # only widgets need IPython
+    from IPython.display import Image, display  # only widgets need IPython
 
-    display(fig)
+    display(Image(data=render_png(fig), format="png"))
 
+
+#: Axes positions of the widget figures laid out so far, by :func:`layout_signature`.
+_LAYOUTS: dict[tuple, list] = {}
+_LAYOUTS_MAX = 64
+
+
+def _lines(text) -> int:
+    """How many lines a Text artist takes (0 when empty): what its height depends on."""
+    t = text.get_text() if text is not None else ""
+    return t.count("\n") + 1 if t else 0
+
+
+def layout_signature(fig: Figure) -> tuple:
+    """What a figure's constrained layout depends on, short of its tick labels: its size, and
+    per axes the grid cell, the title, axis-label and legend line counts, scales and aspect
+    (with a fixed aspect, the shape of the data box to two digits).
+    Two figures with the same signature get the same layout (up to their tick labels' widths,
+    which the layout's padding absorbs: tested for every widget at its sliders' ends)."""
+    def grid(ax):
+        ss = ax.get_subplotspec()
+        if ss is None:
+            return None
+        gs = ss.get_gridspec()
+        return (ss.rowspan.start, ss.rowspan.stop, ss.colspan.start, ss.colspan.stop,
+                gs.get_geometry(), tuple(gs.get_width_ratios() or ()),
+                tuple(gs.get_height_ratios() or ()))
+
+    def legend(ax):
+        lg = ax.get_legend()
+        return None if lg is None else (len(lg.get_texts()), lg._loc, lg._bbox_to_anchor is not None)
+
+    def shape(ax):
+        # an axes of fixed aspect takes the shape of its data box: part of the layout
+        if ax.get_aspect() == "auto":
+            return None
+        (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
+        return float(f"{abs((y1 - y0) / (x1 - x0)) if x1 != x0 else 0.0:.2g}")
+
+    axes = tuple((type(ax).__name__, grid(ax), ax.axison, ax.get_aspect(), shape(ax), ax.get_xscale(),
+                  ax.get_yscale(), _lines(ax.title), _lines(ax._left_title), _lines(ax._right_title),
+                  _lines(ax.xaxis.label), _lines(ax.yaxis.label), ax.xaxis.get_label_position(),
+                  ax.yaxis.get_label_position(), ax.xaxis.get_ticks_position(),
+                  ax.yaxis.get_ticks_position(), legend(ax)) for ax in fig.axes)
+    return (tuple(fig.get_size_inches()), fig.dpi, _lines(fig._suptitle), _lines(fig._supxlabel),
+            _lines(fig._supylabel), axes)
+
+
+def render_png(fig: Figure) -> bytes:
+    """``fig`` as PNG bytes at its own size and resolution, drawn once.
+
+    A widget draws a figure of the same make at every step. The course style's constrained
+    layout takes about half of a step's drawing time (it measures every label before the
+    draw), so the first figure of a :func:`layout_signature` is laid out by it and the
+    positions of its axes are kept; a later figure with the same signature is drawn at those
+    positions, without the layout pass (tests/layout_support.py measures the result at every
+    widget's control ends). Drawn by the Agg canvas directly: ``savefig`` would draw a
+    figure with a layout engine twice (once to measure, once to render), and so would the
+    inline backend's ``bbox_inches='tight'``; the layout already keeps labels inside."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.layout_engine import ConstrainedLayoutEngine
+
+    key = kept = None
+    if isinstance(fig.get_layout_engine(), ConstrainedLayoutEngine):
+        key = layout_signature(fig)
+        kept = _LAYOUTS.get(key)
+        if kept is not None:
+            fig.set_layout_engine("none")
+            for ax, (pos, title_at_top) in zip(fig.axes, kept):
+                ax.set_position(pos)
+                if title_at_top:
+                    # The first figure's titles sat on the frame: place these there too,
+                    # instead of measuring the ticks again to see whether they must move
+                    # (a third of a step on a figure with log axes).
+                    for t in (ax.title, ax._left_title, ax._right_title):
+                        t.set_y(1.0)
+                    ax._autotitlepos = False
+    buf = io.BytesIO()
+    FigureCanvasAgg(fig).print_png(buf)
+    if key is not None and kept is None:
+        if len(_LAYOUTS) >= _LAYOUTS_MAX:
+            _LAYOUTS.pop(next(iter(_LAYOUTS)))
+        _LAYOUTS[key] = [(ax.get_position(original=True).frozen(),
+                          ax.xaxis.get_ticks_position() == "bottom"
+                          and ax.xaxis.get_label_position() == "bottom"
+                          and all(t.get_position()[1] == 1.0
+                                  for t in (ax.title, ax._left_title, ax._right_title)))
+                         for ax in fig.axes]
+    return buf.getvalue()
 
 
 def notebook_setup(*, precision: int = 3, linewidth: int = 110) -> None:
