@@ -24,6 +24,15 @@ off. A pickle can run code when loaded, so entries are read only from a folder t
 owned by the current user and not writable by group or others; any other folder is used as
 if it were empty (results computed, nothing written), with a warning.
 
+A class shares one more, read-only folder: ``ANNSLAM_CLASS_CACHE``, filled once for the
+whole class (``python -m annslam_lib cache warm``; the hub's set-up does it with the
+students' own environment) and consulted when the user's own folder has no entry, so that a
+student's first Run All reads the studies instead of computing them. Its entries are read
+only when nobody but root or the current user can change them: the folder, every folder
+above it (a sticky one such as ``/tmp`` counts as closed) and the entry's two files are owned
+by root or the current user and not writable by group or others. Otherwise it is ignored,
+with a warning.
+
 The results are the same as computed: the functions are seeded and deterministic, and a
 test recomputes a cached study and compares (tests/test_cache.py).
 """
@@ -41,12 +50,14 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["memoize", "cache_dir", "clear", "key_of", "code_hash", "STATS"]
+__all__ = ["memoize", "cache_dir", "class_cache_dir", "clear", "key_of", "code_hash", "STATS"]
 
-#: Per process: hits, misses (computed and stored), repaired (corrupt entry recomputed),
-#: unusable (folder not safe or not writable: computed, not stored), unkeyed (an argument
-#: without a content hash: computed, not stored).
-STATS = {"hits": 0, "misses": 0, "repaired": 0, "unusable": 0, "unkeyed": 0}
+#: Per process: hits, class_hits (read from the class's folder), misses (computed and
+#: stored), repaired (corrupt entry recomputed), unusable (folder not safe or not writable:
+#: computed, not stored), untrusted (a class folder others could change: ignored), unkeyed
+#: (an argument without a content hash: computed, not stored).
+STATS = {"hits": 0, "class_hits": 0, "misses": 0, "repaired": 0, "unusable": 0,
+         "untrusted": 0, "unkeyed": 0}
 
 _ROOT = Path(__file__).resolve().parent
 _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
@@ -61,6 +72,56 @@ def cache_dir() -> Path | None:
         return Path(env).expanduser()
     import platformdirs
     return Path(platformdirs.user_cache_dir("annslam")) / "studies"
+
+
+def class_cache_dir() -> Path | None:
+    """The class's read-only study folder (``ANNSLAM_CLASS_CACHE``), or None."""
+    env = os.environ.get("ANNSLAM_CLASS_CACHE", "")
+    if not env or os.environ.get("ANNSLAM_CACHE", "").lower() == "off":   # off: every cache
+        return None
+    return Path(env).expanduser()
+
+
+def _closed(st, *, sticky_ok: bool = False) -> bool:
+    """Owned by root or us, and not writable by group or others (a sticky folder lets
+    others add names but not rename or remove ours)."""
+    if st.st_uid not in (0, os.getuid()):
+        return False
+    open_ = st.st_mode & (stat.S_IWGRP | stat.S_IWOTH)
+    return not open_ or (sticky_ok and bool(st.st_mode & stat.S_ISVTX))
+
+
+def _trusted(folder: Path) -> bool:
+    """Only root or this user can change what ``folder`` holds (module docstring)."""
+    try:
+        folder = folder.resolve(strict=True)
+        return _closed(folder.stat()) and all(_closed(p.stat(), sticky_ok=True)
+                                              for p in folder.parents)
+    except OSError:
+        return False
+
+
+def _load_class(name: str):
+    """(True, value) from the class's folder, else (False, None)."""
+    folder = class_cache_dir()
+    if folder is None or not folder.is_dir():
+        return False, None
+    entry = folder / name
+    try:
+        files_closed = all(_closed(p.stat()) for p in (entry, entry.with_suffix(".sha256")))
+    except FileNotFoundError:
+        return False, None
+    except OSError:
+        files_closed = False
+    if not (files_closed and _trusted(folder)):
+        STATS["untrusted"] += 1
+        warnings.warn(f"the class study cache {folder} (ANNSLAM_CLASS_CACHE) could be changed by "
+                      "users other than root and you: not read", RuntimeWarning, stacklevel=3)
+        return False, None
+    found, value = _load(entry)
+    if found:
+        STATS["class_hits"] += 1
+    return found, value
 
 
 @functools.lru_cache(maxsize=1)
@@ -179,10 +240,14 @@ def memoize(fn=None, *, ignore=()):
             warnings.warn(f"the study cache {folder} is not a folder of this user's that only "
                           "they can write: not used (set ANNSLAM_CACHE)", RuntimeWarning,
                           stacklevel=2)
-            return fn(*args, **kwargs)
+            found, value = _load_class(entry.name)
+            return value if found else fn(*args, **kwargs)
         found, value = _load(entry)
         if found:
             STATS["hits"] += 1
+            return value
+        found, value = _load_class(entry.name)       # the class's, read, never copied
+        if found:
             return value
         value = fn(*args, **kwargs)
         STATS["misses"] += 1

@@ -4,7 +4,9 @@ real hub needs per student. Loopback only, bounded (every wait has a deadline), 
     sudo ANNSLAM_HUB_DIR=/srv/annslam-hub .venv/bin/python benchmarks/hub_load.py \\
         [--students 10] [--chapter 05_ekf_slam] [--class-size 100] [--window 60]
 
-The hub folder must be prepared (``./course.sh hub --prepare-only``). The script makes N
+The hub folder must be prepared (``./course.sh hub --prepare-only``; the class's studies it
+computes are read by every student's Run All; a folder prepared with ``--no-studies``
+measures each student computing them). The script makes N
 short-lived student accounts (``loadNN``), starts all N servers at once and times how long
 until every one is ready; then each student opens a kernel and runs every code cell of the
 chapter as a student who has finished it would (the instructor version's cells, solutions

@@ -145,3 +145,120 @@ def test_the_command_line_says_where_and_clears(cache, capsys):
     assert cli.main(["cache", "clear"]) == 0
     assert capsys.readouterr().out == f"removed 1 entries from {cache}\n"
     assert not list(cache.glob("*.pkl"))
+
+
+# -- the class's read-only folder (ANNSLAM_CLASS_CACHE) --------------------------------------
+
+@pytest.fixture
+def class_folder(tmp_path, monkeypatch, cache):
+    """A class folder holding one entry (_square_sum([9.0])), computed there; the student's
+    own folder (``cache``) empty."""
+    shared = tmp_path / "class" / "studies"
+    shared.parent.mkdir(mode=0o755)
+    monkeypatch.setenv("ANNSLAM_CACHE", str(shared))
+    _square_sum([9.0])
+    for p in [shared, *shared.iterdir()]:
+        os.chmod(p, 0o755 if p.is_dir() else 0o644)
+    monkeypatch.setenv("ANNSLAM_CACHE", str(cache))
+    monkeypatch.setenv("ANNSLAM_CLASS_CACHE", str(shared))
+    monkeypatch.setattr(_cache, "STATS", dict.fromkeys(_cache.STATS, 0))
+    CALLS.clear()
+    return shared
+
+
+def test_the_class_folder_is_read_when_ones_own_has_no_entry_and_never_copied(class_folder,
+                                                                             cache):
+    assert _square_sum([9.0]) == 81.0
+    assert CALLS == [] and _cache.STATS["class_hits"] == 1 and _cache.STATS["misses"] == 0
+    assert not list(cache.glob("*.pkl"))                   # read there, not copied here
+    assert _square_sum([10.0]) == 100.0                    # not in it: computed, stored here
+    assert len(CALLS) == 1 and len(list(cache.glob("*.pkl"))) == 1
+    assert not (class_folder / next(cache.glob("*.pkl")).name).exists()
+
+
+@pytest.mark.parametrize("what", ["folder", "entry", "checksum", "parent"])
+def test_a_class_folder_others_could_change_is_not_read(class_folder, what):
+    entry = next(class_folder.glob("*.pkl"))
+    target = {"folder": class_folder, "entry": entry, "checksum": entry.with_suffix(".sha256"),
+              "parent": class_folder.parent}[what]
+    mode = target.stat().st_mode & 0o7777
+    os.chmod(target, mode | 0o022)                          # group and others may write
+    try:
+        with pytest.warns(RuntimeWarning, match="could be changed by users other than"):
+            assert _square_sum([9.0]) == 81.0
+    finally:
+        os.chmod(target, mode)
+    assert len(CALLS) == 1 and _cache.STATS["untrusted"] == 1
+    assert _cache.STATS["class_hits"] == 0
+
+
+def test_a_sticky_folder_above_like_tmp_keeps_the_class_folder_trusted(class_folder):
+    parent = class_folder.parent
+    os.chmod(parent, 0o1777)
+    try:
+        assert _square_sum([9.0]) == 81.0
+    finally:
+        os.chmod(parent, 0o755)
+    assert CALLS == [] and _cache.STATS["class_hits"] == 1
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="giving a file to another user needs root")
+def test_an_entry_of_another_user_is_not_read(class_folder):
+    entry = next(class_folder.glob("*.pkl"))
+    os.chown(entry, 54321, 54321)
+    with pytest.warns(RuntimeWarning, match="could be changed"):
+        assert _square_sum([9.0]) == 81.0
+    assert len(CALLS) == 1 and _cache.STATS["class_hits"] == 0
+
+
+def test_a_torn_class_entry_is_computed_not_believed(class_folder):
+    entry = next(class_folder.glob("*.pkl"))
+    data = bytearray(entry.read_bytes())
+    data[-3] ^= 0xFF
+    entry.write_bytes(bytes(data))
+    with pytest.warns(RuntimeWarning, match="does not match its checksum"):
+        assert _square_sum([9.0]) == 81.0
+    assert len(CALLS) == 1 and _cache.STATS["class_hits"] == 0
+
+
+def test_off_turns_the_class_folder_off_too(class_folder, monkeypatch):
+    monkeypatch.setenv("ANNSLAM_CACHE", "off")
+    assert _square_sum([9.0]) == 81.0
+    assert len(CALLS) == 1 and _cache.STATS["class_hits"] == 0
+
+
+WARM_CELLS = [
+    "from annslam_lib.data import simulate\nfrom annslam_lib.slam import runner\n"
+    "r = runner.run_cached(simulate.simulate(seed=0, laps=1))\nprint(len(r.trajectory))",
+    "raise NotImplementedError('an exercise left to the student')",
+    "print('after the exercise')",
+]
+
+
+def warm_notebooks(folder):
+    """A folder with one small notebook: a cached run, an exercise that raises, a cell after."""
+    import nbformat
+
+    folder.mkdir(parents=True, exist_ok=True)
+    nb = nbformat.v4.new_notebook()
+    nb.cells = [nbformat.v4.new_code_cell(c) for c in WARM_CELLS]
+    nbformat.write(nb, folder / "small.ipynb")
+    return folder
+
+
+def test_warm_runs_every_notebook_past_its_exercises_and_fills_the_cache(cache, tmp_path,
+                                                                        capsys):
+    from annslam_lib.course import cli
+    from annslam_lib.data import simulate
+    from annslam_lib.slam import runner
+
+    notebooks = warm_notebooks(tmp_path / "nbs")
+    assert cli.main(["cache", "warm", "--notebooks", str(notebooks)]) == 0
+    out = capsys.readouterr().out
+    assert "small.ipynb: " in out and "1 cell(s) raised" in out
+    assert out.strip().endswith(f"{cache}: 1 entries (1 new) after Run All of 1 notebooks")
+    assert len(list(cache.glob("run_cached-*.pkl"))) == 1
+    # the kernel's entry is this process's key: read back, not recomputed
+    runner.run_cached(simulate.simulate(seed=0, laps=1))
+    assert _cache.STATS["hits"] == 1 and _cache.STATS["misses"] == 0
+    assert cli.main(["cache", "warm", "--notebooks", str(tmp_path / "none")]) == 2

@@ -97,6 +97,31 @@ def test_a_students_kernel_cannot_read_or_change_another_students_files(class_hu
     assert again.stdout.strip() == "mine"                # b changed nothing
 
 
+def test_a_students_kernel_reads_the_class_studies_and_cannot_change_them(class_hub, tmp_path):
+    """The set-up's own class-study step (on one small notebook: the tests' hub is prepared
+    without the course's studies), then a student's kernel, as that student: its first run
+    of the study is read from the class's folder, and it cannot write there."""
+    import nbformat
+
+    h, (a, *_) = class_hub
+    nb = nbformat.v4.new_notebook()
+    call = ("from annslam_lib.data import simulate\nfrom annslam_lib.slam import runner\n"
+            "r = runner.run_cached(simulate.simulate(seed=0, laps=1))\n")
+    nb.cells = [nbformat.v4.new_code_cell(call)]
+    nbformat.write(nb, tmp_path / "small.ipynb")
+    hub_setup.warm_class_studies(h.layout, notebooks=tmp_path)
+    entry = next(h.layout.studies.glob("run_cached-*.pkl"))
+    h.api.start_server(a)
+    got = h.api.run(a, call + "from annslam_lib import _cache\n"
+                    f"print(_cache.STATS['class_hits'], _cache.STATS['misses'], len(r.trajectory))\n"
+                    "try:\n"
+                    f"    open({str(entry)!r}, 'ab')\n    print('ALLOWED')\n"
+                    "except PermissionError:\n    print('denied')\n")
+    assert got.error is None, got
+    hits, misses, n, write = got.stdout.split()
+    assert (hits, misses, write) == ("1", "0", "denied") and int(n) > 100
+
+
 def test_only_listed_students_log_in_with_the_students_password(class_hub):
     h, (a, *_) = class_hub
     pw = h.passwords["ANNSLAM_HUB_PASSWORD"]

@@ -163,6 +163,54 @@ def test_a_server_has_one_blas_thread_the_shared_data_and_its_role(tmp_path):
     assert env["ANNSLAM_DATA"] == str(tmp_path / "data")
     assert env["JUPYTER_CONFIG_DIR"] == str(tmp_path / "etc" / "student")
     assert env["OMP_NUM_THREADS"] == env["OPENBLAS_NUM_THREADS"] == "1"
+    assert env["ANNSLAM_CLASS_CACHE"] == str(tmp_path / "studies")
+
+
+def test_the_class_studies_are_computed_once_by_the_students_environment(tmp_path, monkeypatch,
+                                                                         capsys):
+    """hub_setup.warm_class_studies: a Run All of the chapters by the students' interpreter
+    with a student server's settings fills the class folder, opened read-only to all; a
+    student's process with those settings reads its entry; a second set-up reruns nothing,
+    and one after a notebook changed runs again."""
+    from annslam_lib import _cache
+    from annslam_lib.data import simulate
+    from annslam_lib.slam import runner
+
+    layout = hub.HubLayout(tmp_path / "hub")
+    chapters = tmp_path / "notebooks"
+    for folder in (layout.env / "bin", layout.state, layout.studies, chapters):
+        folder.mkdir(parents=True)
+    python = layout.env / "bin" / "python"           # the students' interpreter, here this one
+    python.write_text(f"#!/bin/sh\nexec {sys.executable} \"$@\"\n")
+    python.chmod(0o755)
+    nb = nbformat.v4.new_notebook()
+    nb.cells = [nbformat.v4.new_code_cell(
+        "from annslam_lib.data import simulate\nfrom annslam_lib.slam import runner\n"
+        "r = runner.run_cached(simulate.simulate(seed=0, laps=1))"),
+        nbformat.v4.new_code_cell("raise NotImplementedError('an exercise')")]
+    nbformat.write(nb, chapters / "05_small.ipynb")
+    hub_setup.warm_class_studies(layout, chapters)
+    entries = sorted(layout.studies.glob("*.pkl"))
+    assert [p.name.split("-")[0] for p in entries] == ["run_cached"]
+    assert (layout.studies / ".sha256-of-inputs").exists()
+    assert layout.studies.stat().st_mode & 0o777 == 0o755
+    assert {p.stat().st_mode & 0o777 for p in layout.studies.iterdir()} == {0o644}
+    # a student's process: its own cache empty, the server's environment
+    for k, v in hub.server_env(layout, "student").items():
+        if k != "PATH":
+            monkeypatch.setenv(k, v)
+    monkeypatch.setenv("ANNSLAM_CACHE", str(tmp_path / "own"))
+    monkeypatch.setattr(_cache, "STATS", dict.fromkeys(_cache.STATS, 0))
+    runner.run_cached(simulate.simulate(seed=0, laps=1))
+    assert _cache.STATS["class_hits"] == 1 and _cache.STATS["misses"] == 0
+    capsys.readouterr()
+    hub_setup.warm_class_studies(layout, chapters)
+    assert "class studies: up to date" in capsys.readouterr().out
+    assert sorted(layout.studies.glob("*.pkl")) == entries
+    nb.cells.append(nbformat.v4.new_code_cell("print('a changed chapter')"))
+    nbformat.write(nb, chapters / "05_small.ipynb")
+    hub_setup.warm_class_studies(layout, chapters)      # a changed notebook: computed again
+    assert "Run All of the notebooks" in capsys.readouterr().out
 
 
 # -- JupyterHub's settings ------------------------------------------------------------------

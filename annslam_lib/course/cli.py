@@ -98,6 +98,22 @@ def _cache(args: argparse.Namespace) -> int:
     if args.action == "clear":
         print(f"removed {cache.clear()} entries from {folder}")
         return 0
+    if args.action == "warm":
+        from pathlib import Path
+
+        from .warm import warm_studies
+
+        course = Path(__file__).resolve().parents[2] / "notebooks"     # in a checkout
+        where = Path(args.notebooks) if args.notebooks else course
+        notebooks = sorted(where.glob("*.ipynb"))
+        if not notebooks:
+            print(f"cache warm: no notebooks in {where} (name them with --notebooks DIR)",
+                  file=sys.stderr)
+            return 2
+        out = warm_studies(notebooks)
+        print(f"{folder}: {out['entries']} entries ({out['new']} new) after Run All of "
+              f"{out['notebooks']} notebooks")
+        return 0
     entries = sorted(folder.glob("*.pkl")) if folder.is_dir() else []
     size = sum(p.stat().st_size for p in entries)
     print(f"{folder}: {len(entries)} entries, {size / 1e6:.1f} MB")
@@ -105,12 +121,16 @@ def _cache(args: argparse.Namespace) -> int:
 
 
 def _add_cache(sub) -> None:
-    p = sub.add_parser("cache", help="where the study cache is and how large; clear it",
+    p = sub.add_parser("cache", help="where the study cache is and how large; clear it; "
+                       "fill it (warm)",
                        description="Heavy studies of the notebooks are computed once per "
                        "machine and kept here (ANNSLAM_CACHE, else the per-user cache; "
                        "ANNSLAM_CACHE=off turns it off). An entry is used only for the same "
-                       "library code and arguments.")
-    p.add_argument("action", choices=["where", "clear"])
+                       "library code and arguments. 'warm' runs every notebook once to fill "
+                       "it (a class's shared folder: ANNSLAM_CLASS_CACHE, read-only).")
+    p.add_argument("action", choices=["where", "clear", "warm"])
+    p.add_argument("--notebooks", metavar="DIR",
+                   help="warm: the notebooks to run (default: the course's notebooks/)")
     p.set_defaults(func=_cache)
 
 
@@ -333,11 +353,13 @@ def _hub(args: argparse.Namespace) -> int:
             image_files(HubLayout(Path(args.image_files).resolve()))
             return 0
         if args.prepare_only:
-            prepare(HubLayout.from_env(), args.class_file, args.instructor)
+            prepare(HubLayout.from_env(), args.class_file, args.instructor,
+                    studies=not args.no_studies)
             return 0
         if args.class_file is None:
             raise HubError("name the class: --class FILE (the students' user names, one a line)")
-        start(HubLayout.from_env(), args.class_file, port=args.port, instructor=args.instructor)
+        start(HubLayout.from_env(), args.class_file, port=args.port, instructor=args.instructor,
+              studies=not args.no_studies)
     except HubError as e:
         print(f"hub: {e}", file=sys.stderr)
         return 2
@@ -353,8 +375,11 @@ def _add_hub(sub) -> None:
     p.add_argument("--instructor", default="instructor", metavar="NAME",
                    help="the instructor's account (default instructor)")
     p.add_argument("--prepare-only", action="store_true",
-                   help="set up the hub folder (students' environment, release, data, proxy) "
-                   "and stop")
+                   help="set up the hub folder (students' environment, release, data, class "
+                   "studies, proxy) and stop")
+    p.add_argument("--no-studies", action="store_true",
+                   help="skip computing the class's studies (each student's first Run All "
+                   "of chapters 05-08 then computes them; the tests' hub does this)")
     p.add_argument("--image-files", metavar="DIR",
                    help="write what a single-user image holds (student versions, role "
                    "configurations) into DIR, for hub/z2jh/Dockerfile and binder/, and stop")

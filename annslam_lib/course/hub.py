@@ -80,6 +80,7 @@ class HubLayout:
     etc = property(lambda self: self.root / "etc")
     proxy = property(lambda self: self.root / "proxy")
     state = property(lambda self: self.root / "state")
+    studies = property(lambda self: self.root / "studies")   # the class's study cache
 
     def role_config(self, role: str) -> Path:
         return self.etc / role
@@ -177,6 +178,8 @@ def server_env(layout: HubLayout, role: str) -> dict[str, str]:
     return {
         "PATH": f"{layout.env / 'bin'}:/usr/local/bin:/usr/bin:/bin",
         "ANNSLAM_DATA": str(layout.data),
+        # the studies computed once for the class (hub_setup.warm_class_studies), read-only
+        "ANNSLAM_CLASS_CACHE": str(layout.studies),
         "JUPYTER_CONFIG_DIR": str(layout.role_config(role)),
         # one BLAS thread per kernel: a class shares the machine's cores
         "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",

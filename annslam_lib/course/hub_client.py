@@ -239,9 +239,11 @@ class RunningHub:
 
 def launch(layout: HubLayout, students: list[str], folder: Path, *,
            deadline: float = 90) -> RunningHub:
-    """``python -m annslam_lib hub`` for ``students`` from the prepared folder ``layout``,
-    on free loopback ports, with a fresh admin token and passwords; its log in ``folder``.
-    Returns once the hub's API answers."""
+    """``python -m annslam_lib hub --no-studies`` for ``students`` from the prepared folder
+    ``layout``, on free loopback ports, with a fresh admin token and passwords; its log in
+    ``folder``. Returns once the hub's API answers. The class's studies are whatever
+    ``layout.studies`` holds (``hub_setup.warm_class_studies`` fills it, outside the
+    deadline)."""
     class_file = folder / "class.txt"
     class_file.write_text("".join(f"{s}\n" for s in students))
     port = free_ports()
@@ -252,9 +254,9 @@ def launch(layout: HubLayout, students: list[str], folder: Path, *,
                **passwords)
     log = folder / "hub.log"
     with open(log, "wb") as fh:
-        proc = subprocess.Popen([sys.executable, "-m", "annslam_lib", "hub", "--class",
-                                 str(class_file), "--port", str(port)], env=env, stdout=fh,
-                                stderr=subprocess.STDOUT, start_new_session=True)
+        proc = subprocess.Popen([sys.executable, "-m", "annslam_lib", "hub", "--no-studies",
+                                 "--class", str(class_file), "--port", str(port)], env=env,
+                                stdout=fh, stderr=subprocess.STDOUT, start_new_session=True)
     h = RunningHub(layout, port, token, passwords, proc, log)
     end = time.monotonic() + deadline
     while time.monotonic() < end:

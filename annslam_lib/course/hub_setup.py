@@ -3,7 +3,9 @@
 Each stage is announced by one line and is cheap when nothing changed: the students'
 environment (``scripts/install.py --base environment-student.txt --wheel``, run by a Python
 every user can run), the student versions (released afresh), one verified copy of the data,
-nbgrader's exchange and course folders, each role's Jupyter configuration, and the proxy
+the class's studies (one Run All of every chapter into a read-only study cache; done
+again only when the students' library changed; ``--no-studies`` skips it), nbgrader's
+exchange and course folders, each role's Jupyter configuration, and the proxy
 (``npm ci`` of ``hub/package.json``). Then JupyterHub starts with ``hub/jupyterhub_config.py``.
 """
 from __future__ import annotations
@@ -18,10 +20,10 @@ import sys
 from pathlib import Path
 
 from .hub import (HubError, HubLayout, open_to_all, reachable_by_others, read_class,
-                  running_hub, system_python, write_role_config)
+                  running_hub, server_env, system_python, write_role_config)
 
 __all__ = ["ROOT", "PREPARED", "prepare", "start", "check_private", "copy_data", "install_proxy",
-           "passwords"]
+           "passwords", "warm_class_studies"]
 
 ROOT = Path(__file__).resolve().parents[2]
 PREPARED = ".annslam-hub-prepared"          # written when every stage of prepare() passed
@@ -34,7 +36,7 @@ def say(text: str) -> None:
 def _folders(layout: HubLayout) -> None:
     for folder, mode in [(layout.root, 0o755), (layout.state, 0o700), (layout.release, 0o755),
                          (layout.data, 0o755), (layout.course, 0o700), (layout.etc, 0o755),
-                         (layout.exchange, 0o1777)]:
+                         (layout.exchange, 0o1777), (layout.studies, 0o755)]:
         folder.mkdir(parents=True, exist_ok=True)
         os.chmod(folder, mode)
 
@@ -159,9 +161,51 @@ def check_private() -> None:
                        "you can open (the hub needs only its own folder to be open)")
 
 
-def prepare(layout: HubLayout, class_file=None, instructor: str = "instructor") -> list[str]:
+def warm_class_studies(layout: HubLayout, notebooks: Path | None = None) -> None:
+    """The class's study cache: Run All of every chapter once, by the students' own
+    environment with a student server's settings (the same library code and BLAS threads,
+    so the same keys), into ``layout.studies``, then opened read-only to everyone. Every
+    server reads it (``ANNSLAM_CLASS_CACHE``), so no student's first Run All of chapters
+    05-08 computes the studies again.
+
+    ``notebooks``: the folder run, by default the instructor versions of this checkout (run
+    as root): their studies are a superset of the student versions' (measured: 101 entries
+    against 99; the two more are chapter 08's exercise on measurement-only features, which a
+    student's right answer asks for). Done again only when the students' library or the
+    notebooks changed (their hash is kept in ``.sha256-of-inputs``); stale entries are
+    removed first."""
+    folder = Path(ROOT / "notebooks" if notebooks is None else notebooks)
+    python = str(layout.env / "bin" / "python")
+    env = {**os.environ, **server_env(layout, "student"), "ANNSLAM_CACHE": str(layout.studies)}
+    env.pop("ANNSLAM_CLASS_CACHE")
+    code = subprocess.run([python, "-c", "from annslam_lib._cache import code_hash; "
+                           "print(code_hash())"], env=env, capture_output=True, text=True)
+    h = hashlib.sha256(code.stdout.encode() if code.returncode == 0 else os.urandom(16))
+    for p in sorted(folder.glob("*.ipynb")):
+        h.update(p.name.encode() + b"\0" + p.read_bytes() + b"\0")
+    stamp = layout.studies / ".sha256-of-inputs"
+    if stamp.exists() and stamp.read_text().strip() == h.hexdigest():
+        say(f"class studies: up to date in {layout.studies}")
+        return
+    stamp.unlink(missing_ok=True)
+    for old in [*layout.studies.glob("*.pkl"), *layout.studies.glob("*.sha256")]:
+        old.unlink()
+    say(f"class studies: Run All of the notebooks of {folder} into {layout.studies} "
+        "(a few minutes)")
+    out = subprocess.run([python, "-m", "annslam_lib", "cache", "warm", "--notebooks",
+                          str(folder)], env=env, cwd=str(layout.state))
+    if out.returncode != 0:
+        raise HubError(f"the class's studies could not be computed into {layout.studies} "
+                       "(above)")
+    stamp.write_text(h.hexdigest() + "\n")
+    open_to_all(layout.studies)
+
+
+def prepare(layout: HubLayout, class_file=None, instructor: str = "instructor", *,
+            studies: bool = True) -> list[str]:
     """Every stage of the module docstring but the start; returns the student names
-    (none without a class file: only the folder is prepared)."""
+    (none without a class file: only the folder is prepared). ``studies``: compute the
+    class's study cache (:func:`warm_class_studies`)."""
     if os.geteuid() != 0:
         raise HubError("the hub gives every student a Unix account of their own and runs "
                        "their server as it: start it as root")
@@ -179,6 +223,8 @@ def prepare(layout: HubLayout, class_file=None, instructor: str = "instructor") 
     install_student_env(layout)
     release_notebooks(layout)
     copy_data(layout)
+    if studies:
+        warm_class_studies(layout)
     for role in ("student", "instructor"):
         write_role_config(layout, role)
     install_proxy(layout)
@@ -187,11 +233,11 @@ def prepare(layout: HubLayout, class_file=None, instructor: str = "instructor") 
 
 
 def start(layout: HubLayout, class_file, *, port: int = 8000,
-          instructor: str = "instructor", env=None) -> None:
+          instructor: str = "instructor", env=None, studies: bool = True) -> None:
     """Prepare, then replace this process by JupyterHub (``hub.json`` names it)."""
     env = dict(os.environ if env is None else env)
     check_private()
-    students = prepare(layout, class_file, instructor)
+    students = prepare(layout, class_file, instructor, studies=studies)
     env.update(passwords(layout, env))
     env.update({"ANNSLAM_HUB_DIR": str(layout.root), "ANNSLAM_HUB_CLASS":
                 str(Path(class_file).resolve()), "ANNSLAM_HUB_INSTRUCTOR": instructor,
