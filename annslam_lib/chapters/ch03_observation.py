@@ -158,6 +158,9 @@ def measurement_explorer(*, landmark=(10.0, 3.0), sigma_xy: float = 0.3,
             return
         fig, axes = widget_figure(1, 2, figsize=PREDICTION_FIGSIZE)  # not pyplot: see widget_figure
         draw_prediction(s, n_samples=n_samples, axes=axes)
+        # one view of the scene for every landmark position (the sliders' reach): the
+        # landmark moves in a still frame, and the figure keeps one layout (render_png)
+        axes[0].set(xlim=(-7.0, 42.0), ylim=(-22.0, 22.0))
         holder["summary"] = s
         print(f"z = (range {s['range']:.2f} m, bearing {math.degrees(s['bearing']):.1f} deg); "
               f"sigma_range {s['sigma_range']:.3f} m, sigma_bearing "

@@ -13,6 +13,7 @@ from scipy.stats import chi2
 from ipywidgets import Dropdown, FloatSlider, interactive
 
 from .. import _checks
+from .._cache import memoize
 from ..data.records import Dataset, truncate
 from ..evaluation.summary import run_metrics
 from ..evaluation.trajectory import trajectory_errors
@@ -24,7 +25,7 @@ from ..slam.dead_reckoning import dead_reckon
 from ..slam.results import STATUS
 from ..slam.runner import run
 
-__all__ = ["setup", "compare", "COMPARED", "paths_figure",
+__all__ = ["setup", "compare", "COMPARED", "paths_figure", "SHIFTS",
            "moved_beacon_sweep", "moved_beacon_figure", "missing_beacon", "state_at",
            "wrong_association", "map_error_summary", "map_error_explorer", "EXPLORER_FIGSIZE"]
 
@@ -115,24 +116,35 @@ def _sightings(o, beacon: int) -> np.ndarray:
     return (o.landmark == beacon) & (o.status == STATUS["associated"])
 
 
-def moved_beacon_sweep(car: Dataset, beacon: int, shifts, *, gps_mode: str = "none") -> dict:
+#: The shifts of the moved-beacon study, in metres: the explorer's slider (0 to 1.5 by 0.1).
+SHIFTS = tuple(round(0.1 * k, 1) for k in range(16))
+
+
+def _moved_row(car: Dataset, beacon: int, shift: float, cfg: SlamConfig, ref, own) -> dict:
+    b = car.beacons.copy()
+    b[beacon, 0] += shift
+    r = ref if shift == 0 else localisation.localise(localisation.with_beacons(car, b), cfg)
+    m = run_metrics(r, car)
+    return {"beacon": beacon, "shift": float(shift), "sightings": int(own.sum()),
+            "accepted": int(np.sum(_sightings(r.observations, beacon)[own])),
+            "rejected": int(np.sum((r.observations.status == STATUS["rejected"])[own])),
+            "traj_rmse": m.traj_rmse, "nis_per_dof": m.nis_per_dof,
+            "errors": trajectory_errors(r.odometry_trajectory, car.gps)}
+
+
+@memoize
+def moved_beacon_sweep(car: Dataset, beacon: int, shifts=SHIFTS, *, gps_mode: str = "none") -> dict:
     """Localisation with beacon ``beacon`` of the known map moved by each of ``shifts``
-    metres along x (the true beacon stays where it is). Per shift: how many of the
-    beacon's sightings (those of the run with the right map) were still associated or
-    were rejected, the trajectory RMSE against GPS and the laser NIS per dof."""
+    metres along x (the true beacon stays where it is). Per shift (``rows``): how many of
+    the beacon's sightings (those of the run with the right map) were still associated or
+    were rejected, the trajectory RMSE against GPS, the laser NIS per dof and the error
+    along the run. Computed once per machine, then read from the study cache (the
+    explorer's slider moves over the same runs)."""
     beacon = _checks.integer("beacon", beacon, lo=0, hi=len(car.beacons) - 1)
     cfg = SlamConfig.for_dataset(car.name, gps_mode=gps_mode)
     ref = _localise(car, cfg)
     own = _sightings(ref.observations, beacon)
-    rows = []
-    for s in shifts:
-        b = car.beacons.copy()
-        b[beacon, 0] += _checks.real("shift", s)
-        r = ref if s == 0 else localisation.localise(localisation.with_beacons(car, b), cfg)
-        m = run_metrics(r, car)
-        rows.append({"shift": float(s), "accepted": int(np.sum(_sightings(r.observations, beacon)[own])),
-                     "rejected": int(np.sum((r.observations.status == STATUS["rejected"])[own])),
-                     "traj_rmse": m.traj_rmse, "nis_per_dof": m.nis_per_dof})
+    rows = [_moved_row(car, beacon, _checks.real("shift", s), cfg, ref, own) for s in shifts]
     return {"beacon": beacon, "sightings": int(own.sum()), "rows": rows}
 
 
@@ -204,24 +216,16 @@ def wrong_association(car: Dataset, beacon: int, wrong: int, *, after: float = 3
 def map_error_summary(car: Dataset, beacon: int, shift: float, *, cache: dict | None = None) -> dict:
     """One setting of the explorer: localisation (no GPS) with ``beacon`` moved by
     ``shift`` m along x; its RMSE, the beacon's accepted and rejected sightings (of those
-    the right map's run associated), and the error along the run. ``cache`` keeps earlier
-    settings."""
+    the right map's run associated), and the error along the run (a row of
+    :func:`moved_beacon_sweep`). ``cache`` keeps earlier settings."""
     cache = {} if cache is None else cache
     beacon = _checks.integer("beacon", beacon, lo=0, hi=len(car.beacons) - 1)
     key = (beacon, round(_checks.real("shift", shift), 6))
-    if key in cache:
-        return cache[key]
-    cfg = SlamConfig.for_dataset(car.name, gps_mode="none")
-    own = _sightings(_localise(car, cfg).observations, beacon)
-    b = car.beacons.copy()
-    b[beacon, 0] += key[1]
-    r = localisation.localise(localisation.with_beacons(car, b), cfg)
-    m = run_metrics(r, car)
-    cache[key] = {"beacon": beacon, "shift": key[1], "sightings": int(own.sum()),
-                  "accepted": int(np.sum(_sightings(r.observations, beacon)[own])),
-                  "rejected": int(np.sum((r.observations.status == STATUS["rejected"])[own])),
-                  "traj_rmse": m.traj_rmse, "nis_per_dof": m.nis_per_dof,
-                  "errors": trajectory_errors(r.odometry_trajectory, car.gps)}
+    if key not in cache:
+        cfg = SlamConfig.for_dataset(car.name, gps_mode="none")
+        ref = _localise(car, cfg)
+        cache[key] = _moved_row(car, beacon, key[1], cfg, ref,
+                                _sightings(ref.observations, beacon))
     return cache[key]
 
 
@@ -229,7 +233,9 @@ def map_error_explorer(car: Dataset, *, beacon: int = 12, shift: float = 0.0):
     """A dropdown for the beacon and a slider for how far its map position is wrong; shows
     the localisation error along the run and what the gate did with its sightings.
     ``widget.holder['summary']`` keeps the latest :func:`map_error_summary`."""
-    holder, cache = {}, {}
+    holder = {}
+    # the chapter's study of this beacon (every slider position, from the study cache)
+    cache = {(r["beacon"], r["shift"]): r for r in moved_beacon_sweep(car, beacon)["rows"]}
     ref = map_error_summary(car, beacon, 0.0, cache=cache)["errors"]     # the right map
 
     def draw(shift: float, beacon: int) -> None:

@@ -65,7 +65,7 @@ def _lines(text) -> int:
 def layout_signature(fig: Figure) -> tuple:
     """What a figure's constrained layout depends on, short of its tick labels: its size, and
     per axes the grid cell, the title, axis-label and legend line counts, scales and aspect
-    (with a fixed aspect, the shape of the data box to two digits).
+    (with a fixed aspect that shapes the box, the shape of the data box to two digits).
     Two figures with the same signature get the same layout (up to their tick labels' widths,
     which the layout's padding absorbs: tested for every widget at its sliders' ends)."""
     def grid(ax):
@@ -82,8 +82,9 @@ def layout_signature(fig: Figure) -> tuple:
         return None if lg is None else (len(lg.get_texts()), lg._loc, lg._bbox_to_anchor is not None)
 
     def shape(ax):
-        # an axes of fixed aspect takes the shape of its data box: part of the layout
-        if ax.get_aspect() == "auto":
+        # an axes of fixed aspect takes the shape of its data box (part of the layout),
+        # unless it widens its data limits instead ("datalim")
+        if ax.get_aspect() == "auto" or ax.get_adjustable() == "datalim":
             return None
         (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
         return float(f"{abs((y1 - y0) / (x1 - x0)) if x1 != x0 else 0.0:.2g}")
