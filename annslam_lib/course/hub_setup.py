@@ -4,8 +4,8 @@ Each stage is announced by one line and is cheap when nothing changed: the stude
 environment (``scripts/install.py --base environment-student.txt --wheel``, run by a Python
 every user can run), the student versions (released afresh), one verified copy of the data,
 the class's studies (one Run All of every chapter into a read-only study cache; done
-again only when the students' library changed; ``--no-studies`` skips it), nbgrader's
-exchange and course folders, each role's Jupyter configuration, and the proxy
+again only when the students' library or the notebooks changed; ``--no-studies`` skips it),
+nbgrader's exchange and course folders, each role's Jupyter configuration, and the proxy
 (``npm ci`` of ``hub/package.json``). Then JupyterHub starts with ``hub/jupyterhub_config.py``.
 """
 from __future__ import annotations
