@@ -10,7 +10,8 @@ trained networks). A call's key is the SHA-256 of
   change that could alter a result),
 - the BLAS thread settings (``OMP_NUM_THREADS``, ``OPENBLAS_NUM_THREADS``,
   ``MKL_NUM_THREADS``): another thread count may change a result at rounding level,
-- its arguments by content: numbers, strings, ``None``, tuples, lists, dicts, ranges,
+- its arguments by content, bound to the function's parameters with their defaults (so a
+  call that names an argument, or spells out a default, finds the same entry): numbers, strings, ``None``, tuples, lists, dicts, ranges,
   dataclasses field by field and NumPy arrays by dtype, shape and bytes (a dataset passed
   in is hashed whole). A call with any other argument is computed and not stored
   (counted in :data:`STATS`): a key must never be a guess.
@@ -41,6 +42,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import hashlib
+import inspect
 import os
 import pickle
 import stat
@@ -224,13 +226,20 @@ def memoize(fn=None, *, ignore=()):
     if fn is None:
         return functools.partial(memoize, ignore=tuple(ignore))
 
+    signature = inspect.signature(fn)
+
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
         folder = cache_dir()
         if folder is None:
             return fn(*args, **kwargs)
+        try:                           # one key however the call names its arguments:
+            bound = signature.bind(*args, **kwargs)      # f(d, 12), f(d, beacon=12) and
+        except TypeError:                                 # f(d, 12, shifts=DEFAULT) alike
+            return fn(*args, **kwargs)                    # fn says what is wrong with the call
+        bound.apply_defaults()
         try:
-            key = key_of(fn, args, {k: v for k, v in kwargs.items() if k not in ignore})
+            key = key_of(fn, (), {k: v for k, v in bound.arguments.items() if k not in ignore})
         except TypeError:              # an argument without a content hash: not cached,
             STATS["unkeyed"] += 1      # and fn itself says what it thinks of the argument
             return fn(*args, **kwargs)

@@ -63,6 +63,16 @@ def test_another_argument_or_another_code_is_another_entry(cache, monkeypatch):
     assert len(CALLS) == 6, "an entry of another BLAS thread count was reused"
 
 
+def test_the_same_call_written_another_way_is_the_same_entry(cache):
+    CALLS.clear()
+    assert _square_sum([1, 2]) == 5.0
+    assert _square_sum(a=[1, 2]) == 5.0                    # named
+    assert _square_sum([1, 2], scale=1.0) == 5.0           # the default spelled out
+    assert len(CALLS) == 1 and len(list(cache.glob("*.pkl"))) == 1
+    with pytest.raises(TypeError):                          # a wrong call is fn's to refuse
+        _square_sum([1, 2], 3.0)
+
+
 def test_content_not_identity_makes_the_key():
     @dataclasses.dataclass
     class Box:
