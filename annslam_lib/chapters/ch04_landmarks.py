@@ -155,6 +155,15 @@ def beacon_scrubber(ds: Dataset, *, config: BeaconConfig | None = None, start: i
 
 # ------------------------------------------------------------------ gates in measurement space
 
+def _gate_outlines(zhat, S, gate: float):
+    """Per predicted landmark, its centre and gate outline in measurement space (x: bearing
+    in degrees, y: range in m)."""
+    deg = np.diag([180.0 / math.pi, 1.0])
+    for m, Sj in zip(zhat, S):
+        centre = np.array([math.degrees(m[1]), m[0]])
+        yield centre, ellipse_points(centre, deg @ Sj[::-1, ::-1] @ deg, math.sqrt(gate))
+
+
 def draw_gates(ax, zhat, S, z=None, assign=None, *, gate: float | None = None,
                names=None, title: str = ""):
     """The gates {z : d2(z, zhat_j) <= gate} of predicted landmarks ``zhat`` (m, 2) with
@@ -163,11 +172,7 @@ def draw_gates(ax, zhat, S, z=None, assign=None, *, gate: float | None = None,
     (a line to the landmark they were matched to). ``gate`` defaults to 99 %."""
     gate = gate_threshold(0.99) if gate is None else gate
     zhat, S = np.asarray(zhat, float), np.asarray(S, float)
-    deg = np.diag([180.0 / math.pi, 1.0])
-    for j, (m, Sj) in enumerate(zip(zhat, S)):
-        centre = np.array([math.degrees(m[1]), m[0]])
-        cov = deg @ Sj[::-1, ::-1] @ deg
-        e = ellipse_points(centre, cov, math.sqrt(gate))
+    for j, (centre, e) in enumerate(_gate_outlines(zhat, S, gate)):
         color = GATE_COLORS[j % len(GATE_COLORS)]
         ax.plot(*e.T, "-", lw=1.5, color=color)
         ax.plot(*centre, "s", color=color, ms=6)
@@ -218,10 +223,8 @@ def gate_explorer(*, prob: float = 0.99, new_prob: float = 0.9999):
     options = [0.5, 0.9, 0.95, 0.99, 0.999, 0.9999, 0.999999]
     # One view for every gate (that of the widest): the gates grow and shrink in place,
     # and the figure keeps one layout (plots.style.render_png).
-    deg = np.diag([180.0 / math.pi, 1.0])
-    widest = math.sqrt(gate_threshold(max(options)))
-    pts = np.vstack([ellipse_points(np.array([math.degrees(m[1]), m[0]]), deg @ Sj[::-1, ::-1] @ deg,
-                                    widest) for m, Sj in zip(scene["zhat"], scene["S"])]
+    widest = _gate_outlines(scene["zhat"], scene["S"], gate_threshold(max(options)))
+    pts = np.vstack([e for _, e in widest]
                     + [np.column_stack([np.degrees(scene["z"][:, 1]), scene["z"][:, 0]])])
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     pad = 0.08 * (hi - lo)
