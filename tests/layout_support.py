@@ -16,14 +16,14 @@ from ipywidgets import Checkbox, SelectionSlider
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.layout_engine import ConstrainedLayoutEngine
 
-from annslam_lib.plots import style
+from annslam_lib.plots import blit, style
 
 TOL_PX = 1.0
 
 
-def _clear(fig) -> list[str]:
+def _clear(fig, renderer=None) -> list[str]:
     """What of ``fig`` (drawn at a kept layout) is not clear, as sentences."""
-    renderer = FigureCanvasAgg(fig).get_renderer()
+    renderer = renderer or FigureCanvasAgg(fig).get_renderer()
     page = fig.bbox
     boxes, problems = [], []
     for i, ax in enumerate(fig.axes):
@@ -87,8 +87,32 @@ def assert_kept_layouts_clear(make_widget, *, min_checked: int = 2, only=None) -
             drawn.append(fig)
         return out
 
+    real_png = blit.Blit.png
+    blitted = []
+
+    def blit_png(view):
+        out = real_png(view)
+        problems = _clear(view.fig, view.canvas.get_renderer())
+        shown = np.asarray(view.canvas.buffer_rgba()).copy()
+        # The same state drawn from scratch: the figure without its moving artists, then
+        # those drawn over it, as Blit does. Equal to the pixel unless the kept picture is stale.
+        full = FigureCanvasAgg(view.fig)
+        full.draw()
+        for a in view.moving:
+            if a.get_visible():
+                view.fig.draw_artist(a)
+        whole = np.asarray(full.buffer_rgba())
+        view.fig.set_canvas(view.canvas)
+        differ = int(np.count_nonzero(np.any(shown != whole, axis=-1)))
+        if differ:
+            problems.append(f"the blitted picture differs from the same state drawn from scratch "
+                            f"in {differ} pixels (a changed artist not declared moving?)")
+        blitted.append(problems)
+        return out
+
     style._LAYOUTS.clear()
     FigureCanvasAgg.print_png = print_png
+    blit.Blit.png = blit_png
     printing = np.get_printoptions()
     try:
         with matplotlib.rc_context(), contextlib.redirect_stdout(io.StringIO()):
@@ -102,9 +126,12 @@ def assert_kept_layouts_clear(make_widget, *, min_checked: int = 2, only=None) -
                 setattr(c, "index" if isinstance(c, SelectionSlider) else "value", start)
     finally:
         FigureCanvasAgg.print_png = real
+        blit.Blit.png = real_png
         np.set_printoptions(**printing)
     kept = drawn
     problems = [f"figure {n}: {p}" for n, f in enumerate(kept) for p in _clear(f)]
+    problems += [f"blitted step {n}: {p}" for n, ps in enumerate(blitted) for p in ps]
     assert not problems, "\n".join(problems)
-    assert len(kept) >= min_checked, f"only {len(kept)} figure(s) drawn at a kept layout"
-    return len(kept)
+    checked = len(kept) + len(blitted)
+    assert checked >= min_checked, f"only {checked} figure(s) drawn at a kept layout or blitted"
+    return checked

@@ -157,3 +157,33 @@ def test_bad_input(car_park, sweep):
 def test_kept_layout_stays_clear_at_the_controls_ends(sweep):
     # plots.style.render_png draws later steps at the first step's layout (tests/layout_support.py)
     assert_kept_layouts_clear(lambda: ch08.r_scale_explorer(sweep=sweep, reference=None, scale=1.0))
+
+
+def test_blitted_steps_with_a_reference_match_a_full_draw_and_hold_every_k(sweep):
+    # Chapter 08's explorer blits (plots.blit.Blit): every step of the slider, with the
+    # reference's dashed lines kept in the picture, equals the same state drawn from scratch
+    # (tests/layout_support.py), and the first panel's one view holds every k's trace.
+    ref = {"label": "ANN", "t": sweep[0.3]["t"], "trace": 0.5 * sweep[0.3]["trace"],
+           "pose_trace": 0.9 * sweep[0.3]["pose_trace"], "map_rmse": 0.08,
+           "map_rmse_aligned": 0.04, "traj_rmse": 0.15}
+    views = []
+    real = ch08._view
+
+    def spy(*args):
+        views.append(real(*args))
+        return views[-1]
+
+    ch08._view = spy
+    try:
+        n = assert_kept_layouts_clear(lambda: ch08.r_scale_explorer(sweep=sweep, reference=ref,
+                                                                    scale=0.3))
+    finally:
+        ch08._view = real
+    assert n >= 3
+    lo, hi = views[0].fig.axes[0].get_ylim()
+    for k in SCALES:
+        tr = np.asarray(sweep[k]["trace"])
+        assert lo < tr.min() and tr.max() < hi
+    assert lo < 0.5 * np.min(sweep[0.3]["trace"])
+    with pytest.raises(ValueError, match="not in the sweep"):
+        paper_plots.set_r_scale(views[0].fig, sweep, 0.25)

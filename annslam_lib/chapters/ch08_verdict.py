@@ -22,9 +22,11 @@ from matplotlib.figure import Figure
 
 from ..data.records import Dataset
 from ..paper.study import SCALES, FoldStudy, Study, r_scale_sweep
-from ..plots.paper import plot_pose_trace, plot_r_scale, plot_transfer
+from ..plots.blit import Blit
+from ..plots.paper import (plot_pose_trace, plot_r_scale, plot_transfer, r_scale_moving,
+                           r_scale_trace_limits, set_r_scale)
 from ..plots.slam import CAR_PARK_LIMITS, plot_true_vs_mapped
-from ..plots.style import DPI, FIG_WIDTH, figure, render_png
+from ..plots.style import DPI, FIG_WIDTH, figure
 from ..plots.style import notebook_setup as setup
 from ..slam.config import SlamConfig
 
@@ -100,12 +102,14 @@ def _line(s: dict, reference: dict | None) -> str:
     return text
 
 
-def _render(sweep: dict, scale: float, reference: dict | None) -> bytes:
-    """The three panels as PNG bytes (a matplotlib Figure, not pyplot: nothing is shown as a
-    side effect)."""
-    fig = Figure(figsize=EXPLORER_FIGSIZE, dpi=DPI)
+def _view(sweep: dict, scale: float, reference: dict | None) -> Blit:
+    """The explorer's figure at ``scale``, drawn once; a step moves the k trace, the legend
+    and the markers (:func:`set_r_scale`) over the kept picture (:class:`plots.blit.Blit`).
+    The first panel keeps one view that holds every k's trace."""
+    fig = Figure(figsize=EXPLORER_FIGSIZE, dpi=DPI, layout="constrained")
     plot_r_scale(sweep, scale, reference, fig=fig)
-    return render_png(fig)
+    fig.axes[0].set_ylim(*r_scale_trace_limits(sweep, reference))
+    return Blit(fig, r_scale_moving(fig))
 
 
 def r_scale_explorer(dataset: Dataset | None = None, *, sweep: dict | None = None,
@@ -137,11 +141,14 @@ def r_scale_explorer(dataset: Dataset | None = None, *, sweep: dict | None = Non
                   layout=Layout(width=f"{w}px", max_width="100%", height="auto"))
     text = HTML()
 
+    view = _view(sweep, scale, reference)
+
     def update(_change=None) -> None:
         k = slider.value
         holder["summary"] = sweep[k]
         holder["text"] = _line(sweep[k], reference)
-        image.value = _render(sweep, k, reference)
+        view.replace(*set_r_scale(view.fig, sweep, k))
+        image.value = view.png()
         text.value = f"<pre>{html.escape(holder['text'])}</pre>"
 
     slider.observe(update, names="value")

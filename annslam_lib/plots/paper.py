@@ -9,7 +9,8 @@ from ..evaluation.summary import pose_trace
 from ..paper.study import CONFIGURATIONS, Study
 from .style import FIG_WIDTH
 
-__all__ = ["plot_pose_trace", "plot_transfer", "plot_r_scale"]
+__all__ = ["plot_pose_trace", "plot_transfer", "plot_r_scale", "set_r_scale", "r_scale_moving",
+           "r_scale_trace_limits"]
 
 
 def plot_pose_trace(st: Study, ax=None, *, configs=("beacons", "natural", "ann", "control")):
@@ -71,9 +72,10 @@ def plot_r_scale(sweep: dict, scale: float, reference: dict | None = None, fig=N
     a0, a1, a2 = fig.subplots(1, 3)
     ks = np.array(sorted(sweep))
     s = sweep[scale]
-    if 1.0 in sweep and scale != 1.0:
+    if 1.0 in sweep:            # hidden at k = 1 (the k line is the same): see set_r_scale
         a0.plot(sweep[1.0]["t"], sweep[1.0]["trace"], color="tab:blue", lw=1,
-                label="beacons-only, R × 1", gid="trace_1")
+                label="beacons-only, R × 1" if scale != 1.0 else "_trace_1", gid="trace_1",
+                visible=scale != 1.0)
     a0.plot(s["t"], s["trace"], color="k", lw=1.2, label=f"beacons-only, R × {scale:g}",
             gid="trace_k")
     if reference is not None:
@@ -91,7 +93,7 @@ def plot_r_scale(sweep: dict, scale: float, reference: dict | None = None, fig=N
     a2.plot(ks, aligned, "o-", color="tab:green", label="map RMSE, aligned",
             gid="map_rmse_aligned")
     a2.plot([scale, scale], [s["map_rmse"], s["map_rmse_aligned"]], "s", ms=11, mfc="none",
-            mec="k", mew=1.5)
+            mec="k", mew=1.5, gid="current_map")
     if reference is not None:
         a1.axhline(reference["pose_trace"], color="tab:red", ls="--", label=reference["label"],
                    gid="ref_trace")
@@ -112,3 +114,52 @@ def plot_r_scale(sweep: dict, scale: float, reference: dict | None = None, fig=N
     if fig.get_layout_engine() is None:      # the course style already lays out (constrained)
         fig.tight_layout()
     return fig
+
+
+def _by_gid(fig, gid):
+    return next(a for ax in fig.axes for a in ax.get_children() if a.get_gid() == gid)
+
+
+def r_scale_moving(fig) -> list:
+    """The artists of a :func:`plot_r_scale` figure that :func:`set_r_scale` changes: the
+    R x 1 and R x k traces, the first panel's legend, the two markers of k."""
+    return [_by_gid(fig, g) for g in ("trace_1", "trace_k")] + [fig.axes[0].get_legend()] + [
+        _by_gid(fig, g) for g in ("current", "current_map")]
+
+
+def set_r_scale(fig, sweep: dict, scale: float):
+    """Move a :func:`plot_r_scale` figure to the factor ``scale`` of ``sweep`` (its k trace,
+    label and markers; the R x 1 trace hidden at k = 1, as plot_r_scale draws it) without
+    drawing anything. The first panel's legend is made again with the new label: returns
+    (old legend, new legend). Axis limits are not touched (a widget fixes them beforehand)."""
+    if scale not in sweep:
+        raise ValueError(f"scale {scale!r} is not in the sweep {tuple(sweep)}")
+    s = sweep[scale]
+    a0 = fig.axes[0]
+    if 1.0 in sweep:
+        t1 = _by_gid(fig, "trace_1")
+        t1.set_visible(scale != 1.0)
+        t1.set_label("beacons-only, R × 1" if scale != 1.0 else "_trace_1")
+    k = _by_gid(fig, "trace_k")
+    k.set_data(s["t"], s["trace"])
+    k.set_label(f"beacons-only, R × {scale:g}")
+    _by_gid(fig, "current").set_data([scale], [s["pose_trace"]])
+    _by_gid(fig, "current_map").set_data([scale, scale], [s["map_rmse"], s["map_rmse_aligned"]])
+    old = a0.get_legend()
+    new = a0.legend(fontsize=7)
+    return old, new
+
+
+def r_scale_trace_limits(sweep: dict, reference: dict | None = None) -> tuple[float, float]:
+    """Log-axis limits of the first panel that hold the trace of every k of ``sweep`` and the
+    reference's (one view for a slider over k), with a margin of 5 % of the decades."""
+    vals = [np.asarray(v["trace"], dtype=float) for v in sweep.values()]
+    if reference is not None:
+        vals.append(np.asarray(reference["trace"], dtype=float))
+    v = np.concatenate(vals)
+    v = v[np.isfinite(v) & (v > 0)]
+    if v.size == 0:
+        raise ValueError("the sweep has no positive, finite trace to show")
+    lo, hi = np.log10(v.min()), np.log10(v.max())
+    pad = 0.05 * max(hi - lo, 0.1)
+    return 10.0 ** (lo - pad), 10.0 ** (hi + pad)
