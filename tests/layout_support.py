@@ -107,6 +107,22 @@ def assert_kept_layouts_clear(make_widget, *, min_checked: int = 2, only=None) -
         if differ:
             problems.append(f"the blitted picture differs from the same state drawn from scratch "
                             f"in {differ} pixels (a changed artist not declared moving?)")
+        # The kept picture itself: the figure with every moving artist hidden. A moving artist
+        # that its parent draws anyway (an axis label: the axis draws it) shows here.
+        view.canvas.restore_region(view._background)
+        kept = np.asarray(view.canvas.buffer_rgba()).copy()
+        visible = [a.get_visible() for a in view.moving]
+        for a in view.moving:
+            a.set_visible(False)
+        bare = FigureCanvasAgg(view.fig)
+        bare.draw()
+        differ = int(np.count_nonzero(np.any(kept != np.asarray(bare.buffer_rgba()), axis=-1)))
+        for a, v in zip(view.moving, visible):
+            a.set_visible(v)
+        view.fig.set_canvas(view.canvas)
+        if differ:
+            problems.append(f"the kept picture differs from the figure drawn without its moving "
+                            f"artists in {differ} pixels (a moving artist drawn by its parent?)")
         blitted.append(problems)
         return out
 

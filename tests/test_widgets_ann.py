@@ -91,7 +91,7 @@ def test_plot_hidden_grid_shows_means_and_baselines(grid):
 def test_explorer_follows_the_sliders(grid, monkeypatch):
     g, _ = grid
     shown = []
-    monkeypatch.setattr(ch07, "show_widget_figure", shown.append)
+    monkeypatch.setattr(ch07, "show_png", shown.append)
     w = ch07.hidden_size_explorer(g, hidden=1, seed=0)
     # the plots are redrawn on release only, not at every intermediate slider position
     assert w.children[0].continuous_update is False and w.children[1].continuous_update is False
@@ -108,8 +108,11 @@ def test_explorer_follows_the_sliders(grid, monkeypatch):
     # kernel thread's flush_figures to show half drawn.
     assert plt.get_fignums() == []
     assert s["lbo_rmse"] == g.lbo[1, 1] and s["n_params"] == g.n_params[1]
-    # The left panel is that network's performance plot: its lines are its history.
-    perf = shown[-1].axes[0]
+    # Every draw showed a picture, the figure's (blitted: plots.blit.Blit) ...
+    assert len(shown) == 3 and all(p[:8] == b"\x89PNG\r\n\x1a\n" for p in shown)
+    assert shown[-1] != shown[0]
+    # ... whose left panel is that network's performance plot: its lines are its history.
+    perf = w.view.fig.axes[0]
     val = [ln for ln in perf.lines if ln.get_gid() == "mse_val"][0]
     np.testing.assert_array_equal(val.get_ydata(), g.models[(4, 2)].history["val"])
     assert s["best_val_mse"] == min(val.get_ydata())
@@ -139,5 +142,15 @@ def test_bad_input(ts, grid):
 
 
 def test_kept_layout_stays_clear_at_the_controls_ends(grid):
-    # plots.style.render_png draws later steps at the first step's layout (tests/layout_support.py)
-    assert_kept_layouts_clear(lambda: ch07.hidden_size_explorer(grid[0], hidden=1, seed=0))
+    # The explorer blits (plots.blit.Blit): every step is measured and compared with the same
+    # state drawn from scratch, and the left panel's one view holds every network's history
+    # (tests/layout_support.py).
+    g, _ = grid
+    w = []
+    assert_kept_layouts_clear(lambda: w.append(ch07.hidden_size_explorer(g, hidden=1, seed=0))
+                              or w[-1])
+    (x0, x1), (y0, y1) = w[0].view.fig.axes[0].get_xlim(), w[0].view.fig.axes[0].get_ylim()
+    for m in g.models.values():
+        for part in ("train", "val"):
+            v = np.asarray(m.history[part])
+            assert x0 < 0 and v.size - 1 < x1 and y0 < v.min() and v.max() < y1

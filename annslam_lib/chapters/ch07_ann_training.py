@@ -16,8 +16,10 @@ import numpy as np
 from ipywidgets import SelectionSlider, interactive
 
 from ..ann.evaluation import HiddenSizeGrid, grid_summary
-from ..plots.ann import plot_landmark_errors, plot_performance
-from ..plots.style import figure, show_widget_figure, widget_figure
+from ..plots.ann import (performance_limits, performance_moving, plot_landmark_errors,
+                         plot_performance, set_performance)
+from ..plots.blit import Blit
+from ..plots.style import figure, show_png, widget_figure
 from ..plots.style import notebook_setup as setup
 
 __all__ = ["setup", "plot_hidden_grid", "loop_mistakes_figure", "landmark_errors_figure",
@@ -65,21 +67,26 @@ def hidden_size_explorer(grid: HiddenSizeGrid, *, hidden: int | None = None, see
     grid.index(hidden, seed)                                   # validates both
     holder = {}
 
+    view = None
+
     def draw(hidden: int, seed: int) -> None:
+        nonlocal view
         holder["summary"] = s = grid_summary(grid, hidden, seed)
         holder["text"] = (f"{hidden} hidden neurons ({s['n_params']} weights), seed {seed}: best "
                           f"epoch {s['best_epoch']} of {s['epochs']}; chronological test RMSE "
                           f"{s['chrono_rmse']:.4f} m, unseen beacons {s['lbo_rmse']:.4f} m "
                           f"(inverse model {s['chrono_base']:.4f} / {s['lbo_base']:.4f} m)")
         print(holder["text"])
-        fig, (a0, a1) = widget_figure(1, 2, figsize=(12, 4.2))  # not pyplot: see widget_figure
-        plot_performance(grid.models[(hidden, seed)], ax=a0)
-        plot_hidden_grid(grid, ax=a1, hidden=hidden, seed=seed)
-        a1.set_title(f"{hidden} neurons, seed {seed}: test {s['chrono_rmse']:.3f} m, "
-                     f"unseen beacons {s['lbo_rmse']:.3f} m", fontsize=10)
-        if fig.get_layout_engine() is None:   # the course style lays out already
-            fig.tight_layout()
-        show_widget_figure(fig)
+        title = (f"{hidden} neurons, seed {seed}: test {s['chrono_rmse']:.3f} m, "
+                 f"unseen beacons {s['lbo_rmse']:.3f} m")
+        if view is None:
+            view = _view(grid, hidden, seed, title)
+        else:
+            a0, a1 = view.fig.axes
+            view.replace(*set_performance(a0, grid.models[(hidden, seed)]))
+            _mark(grid, a1, hidden, seed)
+            a1.set_title(title, fontsize=10)
+        show_png(view.png())
 
     widget = interactive(
         draw,
@@ -89,7 +96,33 @@ def hidden_size_explorer(grid: HiddenSizeGrid, *, hidden: int | None = None, see
                              continuous_update=False))
     widget.holder = holder
     widget.grid = grid
+    widget.view = view                  # the figure the first draw made (plots.blit.Blit)
     return widget
+
+
+def _view(grid: HiddenSizeGrid, hidden: int, seed: int, title: str) -> Blit:
+    """The explorer's figure for (hidden, seed), drawn once; a step moves the left panel's
+    curves, title and legend and the right panel's markers and title
+    (:class:`plots.blit.Blit`). The left panel keeps one view that holds every network's
+    history."""
+    fig, (a0, a1) = widget_figure(1, 2, figsize=(12, 4.2))
+    plot_performance(grid.models[(hidden, seed)], ax=a0)
+    xlim, ylim = performance_limits(grid.models.values())
+    a0.set(xlim=xlim, ylim=ylim, xlabel="epoch")    # one axis for all (the count is printed)
+    plot_hidden_grid(grid, ax=a1, hidden=hidden, seed=seed)
+    a1.set_title(title, fontsize=10)
+    moving = performance_moving(a0) + [ln for ln in a1.lines
+                                       if (ln.get_gid() or "").startswith("current_")] + [a1.title]
+    return Blit(fig, moving)
+
+
+def _mark(grid: HiddenSizeGrid, ax, hidden: int, seed: int) -> None:
+    """Move :func:`plot_hidden_grid`'s markers to the (hidden, seed) network."""
+    i, j = grid.index(hidden, seed)
+    for name, vals in (("chronological test", grid.chrono), ("leave-beacons-out", grid.lbo)):
+        for ln in ax.lines:
+            if ln.get_gid() == f"current_{name}":
+                ln.set_data([hidden], [vals[i, j]])
 
 
 def loop_mistakes_figure(curves: dict):

@@ -49,7 +49,8 @@ from .. import ann
 from .style import BEACON_STYLE, FIG_WIDTH, axes
 from ..evaluation.map import point_rmse
 
-__all__ = ["PART_LABELS", "PART_COLORS", "plot_performance", "plot_error_histogram",
+__all__ = ["PART_LABELS", "PART_COLORS", "plot_performance", "set_performance",
+           "performance_moving", "performance_limits", "plot_error_histogram",
            "plot_regression", "plot_activations", "plot_rmse_comparison",
            "plot_landmark_errors"]
 
@@ -60,10 +61,8 @@ PART_COLORS = {"train": "tab:blue", "val": "tab:green", "test": "tab:red", "all"
 _ZERO_COLOR = "tab:orange"
 
 
-def plot_performance(model, ax=None):
-    """The performance plot (paper Figure 7): per-epoch MSE of each part, log scale, the
-    best validation epoch marked. ``model``: a ``TrainedModel`` (anything with ``history``
-    holding 'epoch', 'train', 'val', 'test' arrays and ``best_epoch``)."""
+def _performance_data(model):
+    """(history, train MSE, epochs, best epoch) of a model, checked (:func:`plot_performance`)."""
     hist = getattr(model, "history", None)
     if not isinstance(hist, dict) or any(k not in hist for k in ("train", "val")):
         raise TypeError("model must have a history with 'train' and 'val' MSE per epoch "
@@ -74,6 +73,14 @@ def plot_performance(model, ax=None):
     if isinstance(best, bool) or not isinstance(best, numbers.Integral) or not 0 <= best < train.size:
         raise ValueError(f"model.best_epoch must be an epoch of the history (0..{train.size - 1}), "
                          f"got {best!r}")
+    return hist, train, epoch, best
+
+
+def plot_performance(model, ax=None):
+    """The performance plot (paper Figure 7): per-epoch MSE of each part, log scale, the
+    best validation epoch marked. ``model``: a ``TrainedModel`` (anything with ``history``
+    holding 'epoch', 'train', 'val', 'test' arrays and ``best_epoch``)."""
+    hist, train, epoch, best = _performance_data(model)
     ax = axes(ax, figsize=(FIG_WIDTH, 4.0))
     for p in ann.SPLITS:
         v = np.asarray(hist.get(p, np.full(train.size, np.nan)), dtype=float)
@@ -92,6 +99,56 @@ def plot_performance(model, ax=None):
     ax.legend(loc="best", fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
     return ax.figure
+
+
+def set_performance(ax, model):
+    """Move a :func:`plot_performance` axes to ``model`` without drawing (a widget's step):
+    its MSE lines, the best epoch's line and point and the title; the x label (the epoch
+    count) is left alone: the axis label is drawn with the axis, which does not move. The
+    legend is made again (its best place depends on the lines): returns (old legend, new
+    legend). Axis limits are not touched (a widget fixes them beforehand). A split the axes
+    has no line for, but the model has data for, raises ValueError."""
+    hist, train, epoch, best = _performance_data(model)
+    lines = {ln.get_gid(): ln for ln in ax.lines}
+    for p in ann.SPLITS:
+        v = np.asarray(hist.get(p, np.full(train.size, np.nan)), dtype=float)
+        line = lines.get(f"mse_{p}")
+        if line is None:
+            if not np.all(np.isnan(v)):
+                raise ValueError(f"the axes has no line for the {p!r} part this model has")
+            continue
+        line.set_data(epoch, v)
+    best_val = float(hist["val"][best])
+    lines["best_epoch"].set_xdata([epoch[best], epoch[best]])
+    lines["best_point"].set_data([epoch[best]], [best_val])
+    ax.set_title(f"Best Validation Performance is {best_val:.4g} at epoch {int(epoch[best])}")
+    old = ax.get_legend()
+    return old, ax.legend(loc="best", fontsize=9)
+
+
+def performance_moving(ax) -> list:
+    """The artists of a :func:`plot_performance` axes that :func:`set_performance` changes."""
+    return [ln for ln in ax.lines if ln.get_gid() in
+            {f"mse_{p}" for p in ann.SPLITS} | {"best_epoch", "best_point"}] + [
+        ax.get_legend(), ax.title]
+
+
+def performance_limits(models) -> tuple[tuple[float, float], tuple[float, float]]:
+    """(x limits, log y limits) of a :func:`plot_performance` axes that hold every model's
+    history (one view for a slider over models), with a margin of 5 % (of the decades in y)."""
+    n, vals = 0, []
+    for m in models:
+        for p in ann.SPLITS:
+            v = np.asarray(m.history.get(p, []), dtype=float)
+            n = max(n, v.size)
+            vals.append(v[np.isfinite(v) & (v > 0)])
+    v = np.concatenate(vals) if vals else np.empty(0)
+    if v.size == 0 or n == 0:
+        raise ValueError("the models have no positive, finite MSE to show")
+    lo, hi = np.log10(v.min()), np.log10(v.max())
+    pad = 0.05 * max(hi - lo, 0.1)
+    x_pad = 0.05 * max(n - 1, 1)
+    return (-x_pad, n - 1 + x_pad), (10.0 ** (lo - pad), 10.0 ** (hi + pad))
 
 
 # --------------------------------------------------------------------------- Figure 6

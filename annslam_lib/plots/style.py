@@ -15,7 +15,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.figure import Figure
 
-__all__ = ["notebook_setup", "axes", "figure", "widget_figure", "show_widget_figure", "render_png",
+__all__ = ["notebook_setup", "axes", "figure", "widget_figure", "show_widget_figure", "show_png",
+           "render_png",
            "layout_signature",
            "BEACON_STYLE", "FIG_WIDTH", "DPI"]
 
@@ -47,9 +48,15 @@ def show_widget_figure(fig: Figure) -> None:
 
     Explicit display, because no pyplot flush knows about the figure; nothing else can show
     it early from another thread, which is the point (see :func:`widget_figure`)."""
+    show_png(render_png(fig))
+
+
+def show_png(png: bytes) -> None:
+    """Display PNG bytes in the callback's Output (a :class:`plots.blit.Blit` picture, or
+    :func:`render_png`'s)."""
     from IPython.display import Image, display  # only widgets need IPython
 
-    display(Image(data=render_png(fig), format="png"))
+    display(Image(data=png, format="png"))
 
 
 #: Axes positions of the widget figures laid out so far, by :func:`layout_signature`.
