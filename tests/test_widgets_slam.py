@@ -20,6 +20,7 @@ from annslam_lib.evaluation import consistency
 from annslam_lib.evaluation import map as map_eval
 from annslam_lib.evaluation import trajectory
 from annslam_lib.slam import runner
+from annslam_lib.evaluation.summary import pose_trace  # noqa: E402
 from layout_support import assert_kept_layouts_clear  # noqa: E402
   # noqa: E402
 
@@ -130,5 +131,32 @@ def test_explorer_follows_its_sliders(car_park, full_run):
 
 
 def test_kept_layout_stays_clear_at_the_controls_ends(car_park):
-    # plots.style.render_png draws later steps at the first step's layout (tests/layout_support.py)
+    # The explorer blits (plots.blit.Blit): every step at the controls' ends is measured and
+    # equals the same state drawn from scratch (tests/layout_support.py)
     assert_kept_layouts_clear(lambda: ch05.slam_explorer(car_park, t_end=40.0), only=(0, 1, 5))
+
+
+def test_time_steps_reuse_one_view_and_a_setting_outside_it_draws_anew(car_park, full_run,
+                                                                     monkeypatch):
+    views = []
+    real = ch05._view
+    monkeypatch.setattr(ch05, "_view", lambda *a: views.append(real(*a)) or views[-1])
+    w = ch05.slam_explorer(car_park, t_end=40.0)
+    t_slider, speed = w.children[0], w.children[1]
+    assert len(views) == 1
+    _, ax_e, ax_p = views[0].fig.axes
+    # the view holds the whole run at the starting settings: the time slider only redraws data
+    e = trajectory.trajectory_errors(full_run.odometry_trajectory, car_park.gps).error
+    sd = np.sqrt(pose_trace(full_run)[1])
+    assert e.max() < ax_e.get_ylim()[1] and ax_p.get_ylim()[0] < sd.min() < sd.max() < ax_p.get_ylim()[1]
+    for t in (t_slider.min, t_slider.max, 80.0):
+        t_slider.value = t
+    assert len(views) == 1
+    # the largest speed noise lifts the uncertainty out of the view: drawn anew, with ranges
+    # for the whole run at those settings
+    speed.value = speed.max
+    assert len(views) == 2
+    s = ch05.slam_summary(car_park, w.holder["summary"]["result"].config, t_end=t_slider.max)
+    top = ax_p.get_ylim()[1]
+    assert np.sqrt(pose_trace(s["result"])[1]).max() > top
+    assert np.sqrt(pose_trace(s["result"])[1]).max() < views[1].fig.axes[2].get_ylim()[1]

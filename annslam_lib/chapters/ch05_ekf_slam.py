@@ -26,8 +26,9 @@ from ..data.records import Dataset, truncate
 from ..evaluation.summary import pose_trace, run_metrics
 from ..evaluation.trajectory import trajectory_errors
 from ..plots.slam import (CAR_PARK_LIMITS, plot_consistency, plot_correlation,
-                          plot_landmark_zooms, plot_true_vs_mapped)
-from ..plots.style import DPI, FIG_WIDTH, figure, render_png
+                          plot_landmark_zooms, plot_true_vs_mapped, true_path)
+from ..plots.blit import Blit
+from ..plots.style import DPI, FIG_WIDTH, figure
 from ..plots.style import notebook_setup as setup
 from ..slam.config import SlamConfig
 from ..slam.dead_reckoning import initial_pose_from_gps
@@ -86,37 +87,103 @@ def _line(s: dict) -> str:
     return f"t = {s['t_end']:.1f} s: " + s["metrics"].line()
 
 
-def _draw_summary(fig, summary: dict, limits, ellipse_scale: float) -> None:
-    """The explorer's view of a summary on ``fig``: the Figure 5 map up to ``t_end`` (left),
-    the path's distance to GPS and the pose uncertainty over the same time (right)."""
+def _explorer_axes(fig):
+    """The explorer's three axes (map; distance to GPS; position uncertainty), labelled."""
     gs = fig.add_gridspec(2, 2, width_ratios=[1, 1.25])
     ax = fig.add_subplot(gs[:, 0])
-    r, ds = summary["result"], summary["dataset"]
-    plot_true_vs_mapped(r, ds, ax=ax, ellipse_scale=ellipse_scale, limits=limits,
-                        title=f"EKF-SLAM up to t = {summary['t_end']:.1f} s")
-    x, y = r.trajectory[-1, 1:3]
-    ax.plot(x, y, "o", color="k", ms=7, zorder=7)
     ax_e, ax_p = fig.add_subplot(gs[0, 1]), fig.add_subplot(gs[1, 1])
-    odo = r.odometry_trajectory
-    inside = (ds.gps.t >= odo[0, 0]) & (ds.gps.t <= odo[-1, 0])
-    if inside.any():
-        e = trajectory_errors(odo, ds.gps)
-        ax_e.plot(e.t, e.error, lw=1.0)
     ax_e.set(ylabel="distance to GPS [m]", title="the path against GPS")
-    t, tr = pose_trace(r)
-    ax_p.semilogy(t, np.sqrt(tr), lw=1.0, color="tab:purple")
-    ax_p.set(xlabel="time [s]", ylabel="√(P_xx + P_yy) [m]", title="the filter's own position uncertainty")
+    ax_p.set_yscale("log")
+    ax_p.set(xlabel="time [s]", ylabel="√(P_xx + P_yy) [m]",
+             title="the filter's own position uncertainty")
     for a in (ax_e, ax_p):
         a.grid(True, alpha=0.3)
-        a.set_xlim(float(ds.odometry.t[0]), float(ds.odometry.t[-1]))
+    return ax, ax_e, ax_p
 
 
-def _render(summary: dict, limits, ellipse_scale: float) -> bytes:
-    """:func:`_draw_summary` as PNG bytes of :data:`EXPLORER_FIGSIZE` at ``plots.style.DPI``
-    (a matplotlib Figure, not pyplot: nothing is displayed as a side effect)."""
+def _curves(summary: dict):
+    """The right panels' data: (t, distance to GPS) or None when no fix lies inside the run,
+    and (t, sqrt(P_xx + P_yy))."""
+    r, ds = summary["result"], summary["dataset"]
+    odo = r.odometry_trajectory
+    inside = (ds.gps.t >= odo[0, 0]) & (ds.gps.t <= odo[-1, 0])
+    e = trajectory_errors(odo, ds.gps) if inside.any() else None
+    t, tr = pose_trace(r)
+    return (None if e is None else (e.t, e.error)), (t, np.sqrt(tr))
+
+
+def _draw_data(axes3, summary: dict, ellipse_scale: float, limits, *, legend: bool) -> list:
+    """Draw a summary's data on the explorer's axes; returns the artists drawn (and the
+    map's title), so that a blitted step can remove them again."""
+    ax, ax_e, ax_p = axes3
+    before = [set(a.get_children()) for a in axes3]
+    r, ds = summary["result"], summary["dataset"]
+    plot_true_vs_mapped(r, ds, ax=ax, ellipse_scale=ellipse_scale, limits=limits,
+                        title=f"EKF-SLAM up to t = {summary['t_end']:.1f} s",
+                        legend="below" if legend else None)
+    x, y = r.trajectory[-1, 1:3]
+    ax.plot(x, y, "o", color="k", ms=7, zorder=7)
+    e, (t, sd) = _curves(summary)
+    if e is not None:
+        ax_e.plot(*e, lw=1.0, color="tab:blue")
+    ax_p.plot(t, sd, lw=1.0, color="tab:purple")
+    drawn = [c for a, b in zip(axes3, before) for c in a.get_children()
+             if c not in b and c is not a.get_legend()]
+    return drawn + [ax.title]
+
+
+def _view(summary: dict, extent: dict, limits, ellipse_scale: float, t_range) -> Blit:
+    """The explorer's figure, drawn once (:class:`plots.blit.Blit`) with fixed views: the
+    map at ``limits`` (None: around ``extent``'s path, map and truth), the right panels over
+    ``t_range`` and the values of ``extent`` (a summary whose curves the view must hold,
+    e.g. the run to the end); a step replaces only the data."""
     fig = Figure(figsize=EXPLORER_FIGSIZE, dpi=DPI, layout="constrained")
-    _draw_summary(fig, summary, limits, ellipse_scale)
-    return render_png(fig)
+    axes3 = _explorer_axes(fig)
+    ax, ax_e, ax_p = axes3
+    own_limits = limits is None
+    if own_limits:
+        r, ds = extent["result"], extent["dataset"]
+        pts = np.vstack([r.trajectory[:, 1:3], r.landmarks.reshape(-1, 2), true_path(ds)[0]])
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        pad = 0.05 * max(float(np.max(hi - lo)), 1.0)
+        limits = ((lo[0] - pad, hi[0] + pad), (lo[1] - pad, hi[1] + pad))
+    e, (_, sd) = _curves(extent)
+    top = 1.1 * float(np.max(e[1])) if e is not None and len(e[1]) else 1.0
+    ax_e.set_ylim(0.0, max(top, 1e-3))
+    sd = sd[np.isfinite(sd) & (sd > 0)]
+    ax_p.set_ylim(*((sd.min() / 1.3, sd.max() * 1.3) if sd.size else (1e-3, 1.0)))
+    for a in (ax_e, ax_p):
+        a.set_xlim(*t_range)
+    moving = _draw_data(axes3, summary, ellipse_scale, limits, legend=True)
+    view = Blit(fig, moving)
+    view.limits, view.own_limits = limits, own_limits
+    return view
+
+
+def _fits(view: Blit, summary: dict) -> bool:
+    """Whether a summary's curves lie inside the view's fixed ranges (else it is drawn anew)."""
+    _, ax_e, ax_p = view.fig.axes
+    e, (_, sd) = _curves(summary)
+    if e is not None and len(e[1]) and float(np.max(e[1])) > ax_e.get_ylim()[1]:
+        return False
+    lo, hi = ax_p.get_ylim()
+    sd = sd[np.isfinite(sd)]
+    if sd.size and (float(sd.min()) < lo or float(sd.max()) > hi):
+        return False
+    if view.own_limits:                  # a map view of its own (not a surveyed site's)
+        (x0, x1), (y0, y1) = view.limits
+        p = summary["result"].trajectory[:, 1:3]
+        return bool(np.all((p[:, 0] >= x0) & (p[:, 0] <= x1) & (p[:, 1] >= y0) & (p[:, 1] <= y1)))
+    return True
+
+
+def _step(view: Blit, summary: dict, ellipse_scale: float) -> None:
+    """Replace the data of a view by a summary's (a blitted step)."""
+    ax = view.fig.axes[0]
+    for a in view.moving:
+        if a is not ax.title:
+            a.remove()
+    view.set_moving(_draw_data(view.fig.axes, summary, ellipse_scale, view.limits, legend=False))
 
 
 def slam_explorer(dataset: Dataset, config: SlamConfig | None = None, *,
@@ -129,6 +196,11 @@ def slam_explorer(dataset: Dataset, config: SlamConfig | None = None, *,
     in degrees, sigma range, sigma bearing in degrees, gate probability), then the image
     and the text. The latest summary dict is in ``widget.holder["summary"]``, its text in
     ``holder["text"]``.
+
+    The figure blits (:class:`plots.blit.Blit`): its views are fixed to hold the run to the
+    slider's end at the starting settings (a run cut at t is a prefix of it), so a step of
+    t only re-runs the filter and draws the data; a setting whose curves leave the view gets
+    a new view (the run to the end at that setting, then drawn in full).
 
     Built from plain widgets (an Image and an HTML text) rather than ``interactive``: an
     Output widget makes headless executors (nbclient) send every captured output back
@@ -170,6 +242,12 @@ def slam_explorer(dataset: Dataset, config: SlamConfig | None = None, *,
                   layout=Layout(width=f"{w}px", max_width="100%", height="auto"))
     text = HTML()
 
+    # The view's ranges hold the run to the slider's end at these settings (a run cut at t is
+    # a prefix of it: see the module docstring), so moving t only redraws the data.
+    extent = slam_summary(dataset, base, t_end=t1)
+    t_range = (t0, max(float(extent["t_end"]), t0 + 1.0))
+    view: list = []
+
     def update(_change=None) -> None:
         t, sv, sa, sr, sb, gate = (float(w.value) for w in sliders)
         cfg = base.replace(sigma_speed=sv, sigma_steer=math.radians(sa), sigma_range=sr,
@@ -177,7 +255,14 @@ def slam_explorer(dataset: Dataset, config: SlamConfig | None = None, *,
                            new_landmark_prob=max(base.new_landmark_prob, gate))
         s = slam_summary(dataset, cfg, t_end=t)
         holder["summary"], holder["text"] = s, _line(s)
-        image.value = _render(s, limits, ellipse_scale)
+        if not view or not _fits(view[0], s):
+            # the first draw, or a setting took the curves outside the view: drawn anew, its
+            # ranges holding the run to the end at these settings
+            ext = extent if not view else slam_summary(dataset, cfg, t_end=t1)
+            view[:] = [_view(s, ext, limits, ellipse_scale, t_range)]
+        else:
+            _step(view[0], s, ellipse_scale)
+        image.value = view[0].png()
         text.value = f"<pre>{html.escape(holder['text'])}</pre>"
 
     for w in sliders:

@@ -43,6 +43,13 @@ class Blit:
         self.fig.set_layout_engine("none")       # the positions stay where they were drawn
         self._background = self.canvas.copy_from_bbox(fig.bbox)
 
+    def set_moving(self, artists) -> None:
+        """The artists the next steps draw (e.g. the new lines a step plotted, after the
+        previous step's were removed)."""
+        self.moving = list(artists)
+        for a in self.moving:
+            a.set_animated(True)
+
     def replace(self, old, new) -> None:
         """Swap a moving artist for a new one (e.g. a legend made again with new labels)."""
         i = self.moving.index(old)

@@ -116,6 +116,8 @@ def plot_true_vs_mapped(result, dataset=None, ax=None, *, n_sigma: float = 2.0,
         pts = m + ellipse_scale * (pts - m)
         ax.plot(pts[:, 0], pts[:, 1], "-", color=color, lw=0.9,
                 label=f"{label} {tag}" if j == 0 else None)
+    if len(lm) == 0:            # the legend names the ellipses before the first landmark
+        ax.plot([], [], "-", color=color, lw=0.9, label=f"{label} {tag}")
     ax.set(xlabel="x East [m]", ylabel="y North [m]", aspect="equal")
     if limits is not None:
         (x0, x1), (y0, y1) = limits
