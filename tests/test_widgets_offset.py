@@ -171,5 +171,20 @@ def test_bad_input_is_rejected(car_park, turn):
 
 
 def test_kept_layout_stays_clear_at_the_controls_ends(car_park):
-    # plots.style.render_png draws later steps at the first step's layout (tests/layout_support.py)
+    # The explorer blits (plots.blit.Blit): every step at the controls' ends is measured and
+    # equals the same state drawn from scratch (tests/layout_support.py)
     assert_kept_layouts_clear(lambda: ch02.offset_explorer(car_park))
+
+
+def test_a_small_step_reuses_the_view_and_a_far_offset_draws_anew(car_park):
+    w = ch02.offset_explorer(car_park)
+    a_slider = w.children[0]
+    first = w.views[0]
+    top = first.fig.axes[1].get_ylim()[1]
+    assert top == pytest.approx(1.5 * np.max(w.holder["paths"]["error"]))
+    a_slider.value = a_slider.value + 0.01
+    assert w.views[0] is first                        # blitted over the kept picture
+    a_slider.value = a_slider.min                     # the path 4.8 m off: out of the range
+    err = np.max(w.holder["paths"]["error"])
+    assert err > top and w.views[0] is not first
+    assert w.views[0].fig.axes[1].get_ylim()[1] == pytest.approx(1.5 * err)

@@ -22,7 +22,8 @@ from ..slam.dead_reckoning import dead_reckon
 from ..models.geometry import rot
 from ..models.geometry import interpolate_poses
 from ..plots.data import car_outline
-from ..plots.style import figure, show_widget_figure, widget_figure
+from ..plots.blit import Blit
+from ..plots.style import figure, show_png, widget_figure
 from ..data.records import Dataset, Odometry
 from ..models.vehicle import Vehicle
 from ..plots.style import notebook_setup as setup
@@ -258,23 +259,38 @@ def offset_explorer(ds: Dataset, t0: float = TURN[0], t1: float = TURN[1]):
     holder = {"stretch": stretch}
     v = ds.vehicle
     # One map view for every offset (the nominal one's, with room): the laser path moves in
-    # a still frame, and the figure keeps one layout (plots.style.render_png).
+    # a still frame, so a step redraws only the paths over the kept picture (plots.blit).
     p0 = offset_paths(stretch, v.a, v.b)
     pts = np.vstack([p0["axle"][:, :2], p0["laser"][:, :2], stretch.gps_xy])
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     pad = 0.15 * (hi - lo).max()
     view = dict(xlim=(lo[0] - pad, hi[0] + pad), ylim=(lo[1] - pad, hi[1] + pad))
 
+    views = []                  # the blitted figure (plots.blit.Blit), made at the first draw
+
     def draw(a: float, b: float, align: bool) -> None:
-        fig, axes = widget_figure(1, 2, **STRETCH_LAYOUT)  # not pyplot: see widget_figure
-        s = plot_offset_stretch(stretch, a, b, align=align, axes=axes)
-        axes[0].set(**view)
+        p = offset_paths(stretch, a, b, align=align)
+        if not views or np.max(p["error"]) > views[0].fig.axes[1].get_ylim()[1]:
+            # the first draw, or an offset whose distance to GPS leaves the right panel's
+            # range: drawn anew, that range half as high again as this offset's largest
+            fig, axes = widget_figure(1, 2, **STRETCH_LAYOUT)  # not pyplot: see widget_figure
+            axes[1].set_ylim(0.0, 1.5 * max(float(np.max(p["error"])), 0.01))
+            axes[0].set(**view)
+            s, moving = _draw_stretch(stretch, a, b, align, axes)
+            views[:] = [Blit(fig, moving)]
+        else:
+            axes = views[0].fig.axes
+            for artist in views[0].moving:
+                if artist not in (axes[0].title, axes[1].title):
+                    artist.remove()
+            s, moving = _draw_stretch(stretch, a, b, align, axes)
+            views[0].set_moving(moving)
         holder["summary"] = s
-        holder["paths"] = offset_paths(stretch, a, b, align=align)
+        holder["paths"] = p
         print(f"a = {a:.2f} m, b = {b:.2f} m: laser path to GPS RMS {s['rms']:.3f} m, "
               f"max {s['max']:.3f} m over {s['fixes']} fixes; heading correction "
               f"{s['heading_correction_deg']:.2f} deg")
-        show_widget_figure(fig)
+        show_png(views[0].png())
 
     widget = interactive(
         draw,
@@ -284,7 +300,17 @@ def offset_explorer(ds: Dataset, t0: float = TURN[0], t1: float = TURN[1]):
                       continuous_update=False),
         align=Checkbox(value=True, description="fit initial heading"))
     widget.holder = holder
+    widget.views = views
     return widget
+
+
+def _draw_stretch(stretch: Stretch, a: float, b: float, align: bool, axes):
+    """:func:`plot_offset_stretch` on axes whose views are fixed; returns its summary and the
+    artists it drew (with both titles and the legend), for a blitted step to replace."""
+    before = [set(ax.get_children()) for ax in axes]
+    s = plot_offset_stretch(stretch, a, b, align=align, axes=axes)
+    drawn = [c for ax, b0 in zip(axes, before) for c in ax.get_children() if c not in b0]
+    return s, drawn + [axes[0].title, axes[1].title]
 
 
 def offset_geometry_figure(vehicle: Vehicle, headings_deg=(30.0, 150.0)):
