@@ -120,3 +120,28 @@ def test_kinematics_explorer_prints_the_readout_of_its_summary(capsys):
 def test_kept_layout_stays_clear_at_the_controls_ends():
     # plots.style.render_png draws later steps at the first step's layout (tests/layout_support.py)
     assert_kept_layouts_clear(lambda: ch01.kinematics_explorer(speed=2.0, steering=0.3, dt=0.2))
+
+
+def test_small_steps_reuse_the_view_and_the_paths_always_lie_inside_it():
+    # The explorer blits (plots.blit.Blit) in a view around the paths with room to grow: a
+    # speed step of 0.1 m/s keeps it; a path outside it, or shrunk to under half of it, gets
+    # a new one; every path drawn lies inside the view it is drawn in.
+    w = ch01.kinematics_explorer(speed=2.0, steering=0.3, dt=0.2)
+    speed = w.children[0]
+    first = w.views[0]
+    speed.value = 2.1
+    assert w.views[0] is first
+    for v in (5.0, 0.5, 0.0, 3.0):
+        speed.value = v
+        (x0, x1), (y0, y1) = w.views[0].limits
+        ax = w.views[0].fig.axes[0]
+        assert ax.get_xlim() == (x0, x1) and ax.get_ylim() == (y0, y1)
+        for line in ax.lines:
+            xy = line.get_xydata()
+            if len(xy):
+                assert (xy[:, 0] >= x0).all() and (xy[:, 0] <= x1).all()
+                assert (xy[:, 1] >= y0).all() and (xy[:, 1] <= y1).all()
+    speed.value = 5.0
+    big = w.views[0]
+    speed.value = 1.0                                 # a fifth of the path: a closer view
+    assert w.views[0] is not big

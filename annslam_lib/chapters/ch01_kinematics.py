@@ -17,7 +17,8 @@ from ..models.motion import axle_pose, predict, predict_exact
 from ..evaluation.trajectory import TrajectoryErrors
 from ..plots.data import car_outline
 from ..models.vehicle import ACFR_UTE, Vehicle
-from ..plots.style import FIG_WIDTH, figure, show_widget_figure, widget_figure
+from ..plots.blit import Blit
+from ..plots.style import FIG_WIDTH, figure, show_png, widget_figure
 from ..plots.style import notebook_setup as setup
 
 __all__ = ["setup", "circumradius", "arc_vs_euler", "plot_arc_vs_euler", "kinematics_readout",
@@ -105,18 +106,35 @@ def kinematics_explorer(vehicle: Vehicle = ACFR_UTE, *, speed: float = 2.0,
     """Sliders for speed (m/s), steering (rad) and dt (s) drawing the exact arcs of the
     laser and the rear axle against their Euler steps (notebook 01)."""
     holder = {}
+    views = []                  # the blitted figure (plots.blit.Blit) of the current view
 
     def draw(speed: float, steering: float, dt: float) -> None:
         s = arc_vs_euler(speed, steering, dt, vehicle, horizon=horizon)
         holder["summary"] = s
         holder["text"] = kinematics_readout(s)
         print(holder["text"])
-        fig, ax = widget_figure(figsize=(6, 6))  # not pyplot: see widget_figure
-        plot_arc_vs_euler(s, ax)
         r = s["radius_axle"]
-        ax.set_title(f"rear-axle radius {r:.2f} m (L / tan(alpha) = {s['radius_formula']:.2f} m)"
-                     if math.isfinite(r) else "straight ahead: infinite radius", fontsize=10)
-        show_widget_figure(fig)
+        title = (f"rear-axle radius {r:.2f} m (L / tan(alpha) = {s['radius_formula']:.2f} m)"
+                 if math.isfinite(r) else "straight ahead: infinite radius")
+        limits = _scene_limits(s)
+        if not views or not _holds(views[0].limits, limits):
+            # the first draw, or paths that left the view (or shrank to a corner of it): a
+            # new view around them, with room for the next steps
+            fig, ax = widget_figure(figsize=(6, 6))  # not pyplot: see widget_figure
+            (x0, x1), (y0, y1) = limits
+            pad = 0.25 * max(x1 - x0, y1 - y0, 1.0)
+            view = ((x0 - pad, x1 + pad), (y0 - pad, y1 + pad))
+            ax.set(xlim=view[0], ylim=view[1])
+            moving = _draw_arcs(s, ax, title)
+            views[:] = [Blit(fig, moving)]
+            views[0].limits = view
+        else:
+            ax = views[0].fig.axes[0]
+            for artist in views[0].moving:
+                if artist is not ax.title:
+                    artist.remove()
+            views[0].set_moving(_draw_arcs(s, ax, title))
+        show_png(views[0].png())
 
     sliders = dict(
         speed=FloatSlider(value=speed, min=0.0, max=5.0, step=0.1, description="speed [m/s]",
@@ -127,7 +145,34 @@ def kinematics_explorer(vehicle: Vehicle = ACFR_UTE, *, speed: float = 2.0,
                        continuous_update=False, readout_format=".3f"))
     widget = interactive(draw, **sliders)
     widget.holder = holder
+    widget.views = views
     return widget
+
+
+def _scene_limits(s: dict):
+    """((x min, x max), (y min, y max)) of every path of an :func:`arc_vs_euler` summary."""
+    pts = np.vstack([s[k][:, :2] for k in ("exact_laser", "exact_axle", "euler_laser",
+                                           "euler_axle")])
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    return (float(lo[0]), float(hi[0])), (float(lo[1]), float(hi[1]))
+
+
+def _holds(view, limits) -> bool:
+    """Whether a view shows paths of these limits well: inside it, and not shrunk to under
+    half its size (else the scene is drawn anew around them)."""
+    (vx0, vx1), (vy0, vy1) = view
+    (x0, x1), (y0, y1) = limits
+    inside = vx0 <= x0 and x1 <= vx1 and vy0 <= y0 and y1 <= vy1
+    return inside and max(x1 - x0, y1 - y0, 1.0) >= 0.5 * max(vx1 - vx0, vy1 - vy0) - 1e-9
+
+
+def _draw_arcs(s: dict, ax, title: str) -> list:
+    """:func:`plot_arc_vs_euler` and the title on an axes whose view is fixed; returns what
+    it drew (with the legend and the title), for a blitted step to replace."""
+    before = set(ax.get_children())
+    plot_arc_vs_euler(s, ax)
+    ax.set_title(title, fontsize=10)
+    return [c for c in ax.get_children() if c not in before] + [ax.title]
 
 
 def kinematics_readout(s: dict) -> str:
