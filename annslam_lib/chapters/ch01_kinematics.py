@@ -17,7 +17,7 @@ from ..models.motion import axle_pose, predict, predict_exact
 from ..evaluation.trajectory import TrajectoryErrors
 from ..plots.data import car_outline
 from ..models.vehicle import ACFR_UTE, Vehicle
-from ..plots.blit import Blit
+from ..plots.blit import Blit, drawn_by
 from ..plots.style import FIG_WIDTH, figure, show_png, widget_figure
 from ..plots.style import notebook_setup as setup
 
@@ -130,10 +130,7 @@ def kinematics_explorer(vehicle: Vehicle = ACFR_UTE, *, speed: float = 2.0,
             views[0].limits = view
         else:
             ax = views[0].fig.axes[0]
-            for artist in views[0].moving:
-                if artist is not ax.title:
-                    artist.remove()
-            views[0].set_moving(_draw_arcs(s, ax, title))
+            views[0].step(lambda: _draw_arcs(s, ax, title), keep=(ax.title,))
         show_png(views[0].png())
 
     sliders = dict(
@@ -169,10 +166,9 @@ def _holds(view, limits) -> bool:
 def _draw_arcs(s: dict, ax, title: str) -> list:
     """:func:`plot_arc_vs_euler` and the title on an axes whose view is fixed; returns what
     it drew (with the legend and the title), for a blitted step to replace."""
-    before = set(ax.get_children())
-    plot_arc_vs_euler(s, ax)
+    _, drawn = drawn_by([ax], lambda: plot_arc_vs_euler(s, ax))
     ax.set_title(title, fontsize=10)
-    return [c for c in ax.get_children() if c not in before] + [ax.title]
+    return drawn + [ax.title]
 
 
 def kinematics_readout(s: dict) -> str:

@@ -22,7 +22,7 @@ from ..slam.dead_reckoning import dead_reckon
 from ..models.geometry import rot
 from ..models.geometry import interpolate_poses
 from ..plots.data import car_outline
-from ..plots.blit import Blit
+from ..plots.blit import Blit, drawn_by
 from ..plots.style import figure, show_png, widget_figure
 from ..data.records import Dataset, Odometry
 from ..models.vehicle import Vehicle
@@ -280,11 +280,14 @@ def offset_explorer(ds: Dataset, t0: float = TURN[0], t1: float = TURN[1]):
             views[:] = [Blit(fig, moving)]
         else:
             axes = views[0].fig.axes
-            for artist in views[0].moving:
-                if artist not in (axes[0].title, axes[1].title):
-                    artist.remove()
-            s, moving = _draw_stretch(stretch, a, b, align, axes)
-            views[0].set_moving(moving)
+            out = {}
+
+            def redraw():
+                out["s"], moving = _draw_stretch(stretch, a, b, align, axes)
+                return moving
+
+            views[0].step(redraw, keep=(axes[0].title, axes[1].title))
+            s = out["s"]
         holder["summary"] = s
         holder["paths"] = p
         print(f"a = {a:.2f} m, b = {b:.2f} m: laser path to GPS RMS {s['rms']:.3f} m, "
@@ -307,9 +310,7 @@ def offset_explorer(ds: Dataset, t0: float = TURN[0], t1: float = TURN[1]):
 def _draw_stretch(stretch: Stretch, a: float, b: float, align: bool, axes):
     """:func:`plot_offset_stretch` on axes whose views are fixed; returns its summary and the
     artists it drew (with both titles and the legend), for a blitted step to replace."""
-    before = [set(ax.get_children()) for ax in axes]
-    s = plot_offset_stretch(stretch, a, b, align=align, axes=axes)
-    drawn = [c for ax, b0 in zip(axes, before) for c in ax.get_children() if c not in b0]
+    s, drawn = drawn_by(axes, lambda: plot_offset_stretch(stretch, a, b, align=align, axes=axes))
     return s, drawn + [axes[0].title, axes[1].title]
 
 

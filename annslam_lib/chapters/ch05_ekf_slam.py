@@ -27,7 +27,7 @@ from ..evaluation.summary import pose_trace, run_metrics
 from ..evaluation.trajectory import trajectory_errors
 from ..plots.slam import (CAR_PARK_LIMITS, plot_consistency, plot_correlation,
                           plot_landmark_zooms, plot_true_vs_mapped, true_path)
-from ..plots.blit import Blit
+from ..plots.blit import Blit, drawn_by
 from ..plots.style import DPI, FIG_WIDTH, figure
 from ..plots.style import notebook_setup as setup
 from ..slam.config import SlamConfig
@@ -116,20 +116,21 @@ def _draw_data(axes3, summary: dict, ellipse_scale: float, limits, *, legend: bo
     """Draw a summary's data on the explorer's axes; returns the artists drawn (and the
     map's title), so that a blitted step can remove them again."""
     ax, ax_e, ax_p = axes3
-    before = [set(a.get_children()) for a in axes3]
-    r, ds = summary["result"], summary["dataset"]
-    plot_true_vs_mapped(r, ds, ax=ax, ellipse_scale=ellipse_scale, limits=limits,
-                        title=f"EKF-SLAM up to t = {summary['t_end']:.1f} s",
-                        legend="below" if legend else None)
-    x, y = r.trajectory[-1, 1:3]
-    ax.plot(x, y, "o", color="k", ms=7, zorder=7)
-    e, (t, sd) = _curves(summary)
-    if e is not None:
-        ax_e.plot(*e, lw=1.0, color="tab:blue")
-    ax_p.plot(t, sd, lw=1.0, color="tab:purple")
-    drawn = [c for a, b in zip(axes3, before) for c in a.get_children()
-             if c not in b and c is not a.get_legend()]
-    return drawn + [ax.title]
+
+    def draw():
+        r, ds = summary["result"], summary["dataset"]
+        plot_true_vs_mapped(r, ds, ax=ax, ellipse_scale=ellipse_scale, limits=limits,
+                            title=f"EKF-SLAM up to t = {summary['t_end']:.1f} s",
+                            legend="below" if legend else None)
+        x, y = r.trajectory[-1, 1:3]
+        ax.plot(x, y, "o", color="k", ms=7, zorder=7)
+        e, (t, sd) = _curves(summary)
+        if e is not None:
+            ax_e.plot(*e, lw=1.0, color="tab:blue")
+        ax_p.plot(t, sd, lw=1.0, color="tab:purple")
+
+    _, drawn = drawn_by(axes3, draw)
+    return [c for c in drawn if c is not ax.get_legend()] + [ax.title]   # the legend stays
 
 
 def _view(summary: dict, extent: dict, limits, ellipse_scale: float, t_range) -> Blit:
@@ -180,10 +181,8 @@ def _fits(view: Blit, summary: dict) -> bool:
 def _step(view: Blit, summary: dict, ellipse_scale: float) -> None:
     """Replace the data of a view by a summary's (a blitted step)."""
     ax = view.fig.axes[0]
-    for a in view.moving:
-        if a is not ax.title:
-            a.remove()
-    view.set_moving(_draw_data(view.fig.axes, summary, ellipse_scale, view.limits, legend=False))
+    view.step(lambda: _draw_data(view.fig.axes, summary, ellipse_scale, view.limits, legend=False),
+              keep=(ax.title,))
 
 
 def slam_explorer(dataset: Dataset, config: SlamConfig | None = None, *,

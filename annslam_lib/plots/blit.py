@@ -22,7 +22,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 from .style import _mathtext_parser
 
-__all__ = ["Blit"]
+__all__ = ["Blit", "drawn_by"]
 
 
 class Blit:
@@ -50,6 +50,14 @@ class Blit:
         for a in self.moving:
             a.set_animated(True)
 
+    def step(self, draw, keep=()) -> None:
+        """Replace the moving artists: remove them from the figure (but those in ``keep``,
+        e.g. titles a step only re-texts), then ``draw()``, which returns the new ones."""
+        for a in self.moving:
+            if not any(a is k for k in keep):
+                a.remove()
+        self.set_moving(draw())
+
     def replace(self, old, new) -> None:
         """Swap a moving artist for a new one (e.g. a legend made again with new labels)."""
         i = self.moving.index(old)
@@ -69,3 +77,11 @@ class Blit:
         matplotlib.image.imsave(buf, self.canvas.buffer_rgba(), format="png", origin="upper",
                                 dpi=self.fig.dpi, pil_kwargs={"compress_level": 1})
         return buf.getvalue()
+
+
+def drawn_by(axes, draw):
+    """Call ``draw()`` and return (its result, the artists it added to ``axes``, a list of
+    Axes): what a blitted step must draw again and later remove."""
+    before = [set(ax.get_children()) for ax in axes]
+    out = draw()
+    return out, [c for ax, b in zip(axes, before) for c in ax.get_children() if c not in b]
