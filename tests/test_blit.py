@@ -35,7 +35,8 @@ def test_a_step_draws_the_new_marker_over_the_kept_picture():
     assert len(moving) == 1 and moving[0] in ax.lines
     view = Blit(fig, moving)
     view.png()
-    view.step(lambda: drawn_by([ax], lambda: ax.plot([0.5], [0.8], "s", color="k"))[1])
+    view.clear()
+    view.set_moving(drawn_by([ax], lambda: ax.plot([0.5], [0.8], "s", color="k"))[1])
     assert len(ax.lines) == 2                                # the old marker was removed
 
     def expected():

@@ -130,7 +130,8 @@ def kinematics_explorer(vehicle: Vehicle = ACFR_UTE, *, speed: float = 2.0,
             views[0].limits = view
         else:
             ax = views[0].fig.axes[0]
-            views[0].step(lambda: _draw_arcs(s, ax, title), keep=(ax.title,))
+            views[0].clear(keep=(ax.title,))
+            views[0].set_moving(_draw_arcs(s, ax, title))
         show_png(views[0].png())
 
     sliders = dict(

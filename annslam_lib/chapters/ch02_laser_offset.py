@@ -280,14 +280,9 @@ def offset_explorer(ds: Dataset, t0: float = TURN[0], t1: float = TURN[1]):
             views[:] = [Blit(fig, moving)]
         else:
             axes = views[0].fig.axes
-            out = {}
-
-            def redraw():
-                out["s"], moving = _draw_stretch(stretch, a, b, align, axes)
-                return moving
-
-            views[0].step(redraw, keep=(axes[0].title, axes[1].title))
-            s = out["s"]
+            views[0].clear(keep=(axes[0].title, axes[1].title))
+            s, moving = _draw_stretch(stretch, a, b, align, axes)
+            views[0].set_moving(moving)
         holder["summary"] = s
         holder["paths"] = p
         print(f"a = {a:.2f} m, b = {b:.2f} m: laser path to GPS RMS {s['rms']:.3f} m, "

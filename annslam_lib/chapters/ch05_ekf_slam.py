@@ -181,8 +181,8 @@ def _fits(view: Blit, summary: dict) -> bool:
 def _step(view: Blit, summary: dict, ellipse_scale: float) -> None:
     """Replace the data of a view by a summary's (a blitted step)."""
     ax = view.fig.axes[0]
-    view.step(lambda: _draw_data(view.fig.axes, summary, ellipse_scale, view.limits, legend=False),
-              keep=(ax.title,))
+    view.clear(keep=(ax.title,))
+    view.set_moving(_draw_data(view.fig.axes, summary, ellipse_scale, view.limits, legend=False))
 
 
 def slam_explorer(dataset: Dataset, config: SlamConfig | None = None, *,

@@ -46,6 +46,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from .. import ann
+from .blit import log_limits
 from .style import BEACON_STYLE, FIG_WIDTH, axes
 from ..evaluation.map import point_rmse
 
@@ -62,7 +63,8 @@ _ZERO_COLOR = "tab:orange"
 
 
 def _performance_data(model):
-    """(history, train MSE, epochs, best epoch) of a model, checked (:func:`plot_performance`)."""
+    """(history, train MSE, epochs, best epoch, {part: MSE per epoch}) of a model, checked
+    (:func:`plot_performance`, :func:`set_performance`)."""
     hist = getattr(model, "history", None)
     if not isinstance(hist, dict) or any(k not in hist for k in ("train", "val")):
         raise TypeError("model must have a history with 'train' and 'val' MSE per epoch "
@@ -73,19 +75,22 @@ def _performance_data(model):
     if isinstance(best, bool) or not isinstance(best, numbers.Integral) or not 0 <= best < train.size:
         raise ValueError(f"model.best_epoch must be an epoch of the history (0..{train.size - 1}), "
                          f"got {best!r}")
-    return hist, train, epoch, best
+    parts = {}
+    for p in ann.SPLITS:
+        v = np.asarray(hist.get(p, np.full(train.size, np.nan)), dtype=float)
+        if v.shape != train.shape:
+            raise ValueError(f"history[{p!r}] has {v.size} epochs, 'train' has {train.size}")
+        parts[p] = v
+    return hist, train, epoch, best, parts
 
 
 def plot_performance(model, ax=None):
     """The performance plot (paper Figure 7): per-epoch MSE of each part, log scale, the
     best validation epoch marked. ``model``: a ``TrainedModel`` (anything with ``history``
     holding 'epoch', 'train', 'val', 'test' arrays and ``best_epoch``)."""
-    hist, train, epoch, best = _performance_data(model)
+    hist, train, epoch, best, parts = _performance_data(model)
     ax = axes(ax, figsize=(FIG_WIDTH, 4.0))
-    for p in ann.SPLITS:
-        v = np.asarray(hist.get(p, np.full(train.size, np.nan)), dtype=float)
-        if v.shape != train.shape:
-            raise ValueError(f"history[{p!r}] has {v.size} epochs, 'train' has {train.size}")
+    for p, v in parts.items():
         if np.all(np.isnan(v)):
             continue                                   # e.g. no test part
         ax.plot(epoch, v, color=PART_COLORS[p], lw=1.8, label=f"{PART_LABELS[p]}", gid=f"mse_{p}")
@@ -108,10 +113,9 @@ def set_performance(ax, model):
     legend is made again (its best place depends on the lines): returns (old legend, new
     legend). Axis limits are not touched (a widget fixes them beforehand). A split the axes
     has no line for, but the model has data for, raises ValueError."""
-    hist, train, epoch, best = _performance_data(model)
+    hist, train, epoch, best, parts = _performance_data(model)
     lines = {ln.get_gid(): ln for ln in ax.lines}
-    for p in ann.SPLITS:
-        v = np.asarray(hist.get(p, np.full(train.size, np.nan)), dtype=float)
+    for p, v in parts.items():
         line = lines.get(f"mse_{p}")
         if line is None:
             if not np.all(np.isnan(v)):
@@ -141,14 +145,11 @@ def performance_limits(models) -> tuple[tuple[float, float], tuple[float, float]
         for p in ann.SPLITS:
             v = np.asarray(m.history.get(p, []), dtype=float)
             n = max(n, v.size)
-            vals.append(v[np.isfinite(v) & (v > 0)])
-    v = np.concatenate(vals) if vals else np.empty(0)
-    if v.size == 0 or n == 0:
+            vals.append(v)
+    if n == 0:
         raise ValueError("the models have no positive, finite MSE to show")
-    lo, hi = np.log10(v.min()), np.log10(v.max())
-    pad = 0.05 * max(hi - lo, 0.1)
     x_pad = 0.05 * max(n - 1, 1)
-    return (-x_pad, n - 1 + x_pad), (10.0 ** (lo - pad), 10.0 ** (hi + pad))
+    return (-x_pad, n - 1 + x_pad), log_limits(vals, "the models have no positive, finite MSE")
 
 
 # --------------------------------------------------------------------------- Figure 6

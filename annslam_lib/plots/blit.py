@@ -18,11 +18,12 @@ from __future__ import annotations
 import io
 
 import matplotlib.image
+import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 from .style import _mathtext_parser
 
-__all__ = ["Blit", "drawn_by"]
+__all__ = ["Blit", "drawn_by", "log_limits"]
 
 
 class Blit:
@@ -50,13 +51,13 @@ class Blit:
         for a in self.moving:
             a.set_animated(True)
 
-    def step(self, draw, keep=()) -> None:
-        """Replace the moving artists: remove them from the figure (but those in ``keep``,
-        e.g. titles a step only re-texts), then ``draw()``, which returns the new ones."""
+    def clear(self, keep=()) -> None:
+        """Remove the moving artists from the figure (but those in ``keep``, e.g. titles a
+        step only re-texts), before a step draws new ones (:meth:`set_moving`)."""
         for a in self.moving:
             if not any(a is k for k in keep):
                 a.remove()
-        self.set_moving(draw())
+        self.moving = [a for a in self.moving if any(a is k for k in keep)]
 
     def replace(self, old, new) -> None:
         """Swap a moving artist for a new one (e.g. a legend made again with new labels)."""
@@ -85,3 +86,17 @@ def drawn_by(axes, draw):
     before = [set(ax.get_children()) for ax in axes]
     out = draw()
     return out, [c for ax, b in zip(axes, before) for c in ax.get_children() if c not in b]
+
+
+def log_limits(arrays, what: str = "no positive, finite value") -> tuple[float, float]:
+    """Log-axis limits that hold every positive, finite value of ``arrays`` with a margin of
+    5 % of the decades (at least 0.005 decade): one fixed view for a widget's every step.
+    Raises ValueError naming ``what`` when there is nothing to show."""
+    v = np.concatenate([np.ravel(np.asarray(a, dtype=float)) for a in arrays]) if arrays else \
+        np.empty(0)
+    v = v[np.isfinite(v) & (v > 0)]
+    if v.size == 0:
+        raise ValueError(f"{what} to show")
+    lo, hi = np.log10(v.min()), np.log10(v.max())
+    pad = 0.05 * max(hi - lo, 0.1)
+    return 10.0 ** (lo - pad), 10.0 ** (hi + pad)

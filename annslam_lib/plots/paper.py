@@ -7,6 +7,7 @@ import numpy as np
 
 from ..evaluation.summary import pose_trace
 from ..paper.study import CONFIGURATIONS, Study
+from .blit import log_limits
 from .style import FIG_WIDTH
 
 __all__ = ["plot_pose_trace", "plot_transfer", "plot_r_scale", "set_r_scale", "r_scale_moving",
@@ -156,10 +157,4 @@ def r_scale_trace_limits(sweep: dict, reference: dict | None = None) -> tuple[fl
     vals = [np.asarray(v["trace"], dtype=float) for v in sweep.values()]
     if reference is not None:
         vals.append(np.asarray(reference["trace"], dtype=float))
-    v = np.concatenate(vals)
-    v = v[np.isfinite(v) & (v > 0)]
-    if v.size == 0:
-        raise ValueError("the sweep has no positive, finite trace to show")
-    lo, hi = np.log10(v.min()), np.log10(v.max())
-    pad = 0.05 * max(hi - lo, 0.1)
-    return 10.0 ** (lo - pad), 10.0 ** (hi + pad)
+    return log_limits(vals, "the sweep has no positive, finite trace")
