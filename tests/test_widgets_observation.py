@@ -146,3 +146,28 @@ def test_landmark_sigma_slider_adds_its_variance_through_H_m():
 def test_kept_layout_stays_clear_at_the_controls_ends():
     # plots.style.render_png draws later steps at the first step's layout (tests/layout_support.py)
     assert_kept_layouts_clear(lambda: ch03.measurement_explorer(landmark=(10.0, 3.0), sigma_xy=0.3, sigma_phi_deg=5.0))
+
+
+def test_explorer_keeps_its_view_while_the_cloud_stays_in_it():
+    """The figure blits (plots.blit): a landmark step of 0.5 m keeps measurement space's view;
+    a move the cloud leaves it for gets a new view, and every drawn point lies inside the view
+    it is drawn in."""
+    w = ch03.measurement_explorer(landmark=(10.0, 3.0), sigma_xy=0.3, sigma_phi_deg=5.0,
+                                  n_samples=500)
+    sl = sliders(w)
+    view = w.views[0]
+    seen = [view]
+    for x, y in ((10.5, 3.0), (11.0, 3.0), (11.0, 15.0), (2.0, -1.0), (35.0, 0.0)):
+        sl["landmark x"].value, sl["landmark y"].value = x, y
+        v = w.views[0]
+        (bx0, bx1), (ry0, ry1) = v.fig.axes[1].get_xlim(), v.fig.axes[1].get_ylim()
+        assert (bx0, bx1) == pytest.approx(v.limits[0]) and (ry0, ry1) == pytest.approx(v.limits[1])
+        for line in v.fig.axes[1].lines:
+            pts = line.get_xydata()
+            assert np.all((pts[:, 0] >= bx0) & (pts[:, 0] <= bx1) & (pts[:, 1] >= ry0)
+                          & (pts[:, 1] <= ry1)), (x, y)
+        if not any(v is s for s in seen):
+            seen.append(v)
+        if (x, y) == (11.0, 3.0):
+            assert seen == [view]              # two 0.5 m steps: the same blitted figure
+    assert len(seen) >= 3                       # 15 m to the left, then close, then far: new views

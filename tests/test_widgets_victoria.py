@@ -140,6 +140,10 @@ def test_draw_gps_errors_marks_outliers_and_keeps_gaps(sim_run):
     assert crosses.get_xdata()[0] == errors.t[3]
 
 
+def rows_upto(r, t):
+    return int(np.searchsorted(r.trajectory[:, 0], t, side="right"))
+
+
 def test_scrubber_follows_the_slider(sim_run):
     _, r, gps = sim_run
     outliers = np.zeros(gps.t.size, bool)
@@ -150,8 +154,13 @@ def test_scrubber_follows_the_slider(sim_run):
     assert w.children[0].max == int(np.floor(r.trajectory[-1, 0]))
     assert not w.children[0].continuous_update          # one redraw per release, not per pixel
     first = w.holder["summary"]
+    view = w.views[0]
     plt.close("all")
     w.children[0].value = 25
+    # one blitted figure (fixed views): the step moved the time line and redrew the map to t
+    assert w.views == [view] and list(view.moving[-1].get_xdata()) == [25.0, 25.0]
+    track = [a for a in view.moving if a.get_label() == "EKF-SLAM track"]
+    assert len(track) == 1 and track[0].get_xdata().size == rows_upto(r, 25.0)
     # The callback draws outside pyplot (plotting.widget_figure): nothing is left open for a
     # kernel thread's flush_figures to show half drawn.
     assert plt.get_fignums() == []

@@ -21,7 +21,8 @@ from .. import _checks
 from ..models.geometry import wrap_angle
 from ..evaluation.residuals import ROUNDING
 from ..models.observation import observe
-from ..plots.style import figure, show_widget_figure, widget_figure
+from ..plots.blit import Blit, drawn_by
+from ..plots.style import figure, show_png, widget_figure
 from ..models.uncertainty import coverage, draw_ellipse, expected_coverage, monte_carlo, propagate
 from ..plots.style import notebook_setup as setup
 
@@ -145,6 +146,7 @@ def measurement_explorer(*, landmark=(10.0, 3.0), sigma_xy: float = 0.3,
     """Sliders for the landmark position, the pose's position and heading sigmas and the
     landmark's sigma; shows the predicted measurement, S and a Monte-Carlo cloud."""
     holder = {}
+    views = []                  # the blitted figure (plots.blit.Blit), made at the first draw
 
     def draw(landmark_x: float, landmark_y: float, sigma_xy: float, sigma_phi_deg: float,
              sigma_landmark: float) -> None:
@@ -156,18 +158,32 @@ def measurement_explorer(*, landmark=(10.0, 3.0), sigma_xy: float = 0.3,
             holder["summary"] = {"error": str(exc)}
             print(f"cannot predict: {exc}")
             return
-        fig, axes = widget_figure(1, 2, figsize=PREDICTION_FIGSIZE)  # not pyplot: see widget_figure
-        draw_prediction(s, n_samples=n_samples, axes=axes)
-        # one view of the scene for every landmark position (the sliders' reach): the
-        # landmark moves in a still frame, and the figure keeps one layout (render_png)
-        axes[0].set(xlim=(-7.0, 42.0), ylim=(-22.0, 22.0))
+        if views:
+            # a step: the scene keeps its view (the sliders' reach); measurement space keeps
+            # its view while the cloud and ellipse stay inside it and fill half of it
+            view = views[0]
+            axes = view.fig.axes
+            view.clear(keep=(axes[1].title,))
+            view.set_moving(_draw_prediction_data(s, axes, n_samples))
+            if not _holds(view.limits, _line_limits(axes[1])):
+                views.clear()
+        if not views:
+            fig, axes = widget_figure(1, 2, figsize=PREDICTION_FIGSIZE)  # not pyplot: see widget_figure
+            # one view of the scene for every landmark position (the sliders' reach): the
+            # landmark moves in a still frame
+            axes[0].set(xlim=(-7.0, 42.0), ylim=(-22.0, 22.0))
+            moving = _draw_prediction_data(s, axes, n_samples)
+            limits = _measurement_view(_line_limits(axes[1]), s["range"])
+            axes[1].set(xlim=limits[0], ylim=limits[1])
+            views[:] = [Blit(fig, moving)]
+            views[0].limits = limits
         holder["summary"] = s
         print(f"z = (range {s['range']:.2f} m, bearing {math.degrees(s['bearing']):.1f} deg); "
               f"sigma_range {s['sigma_range']:.3f} m, sigma_bearing "
               f"{math.degrees(s['sigma_bearing']):.2f} deg, correlation {s['correlation']:+.2f}; "
               f"Monte Carlo: sd ratios {s['mc_sd_ratio'][0]:.2f} (range), "
               f"{s['mc_sd_ratio'][1]:.2f} (bearing), {100 * s['mc_coverage']:.1f}% inside 2σ")
-        show_widget_figure(fig)
+        show_png(views[0].png())
 
     slider = dict(continuous_update=False, readout_format=".1f")
     widget = interactive(
@@ -184,7 +200,39 @@ def measurement_explorer(*, landmark=(10.0, 3.0), sigma_xy: float = 0.3,
                                    description="σ landmark", **dict(slider, readout_format=".2f")),
     )
     widget.holder = holder
+    widget.views = views
     return widget
+
+
+def _draw_prediction_data(summary: dict, axes, n_samples: int) -> list:
+    """:func:`draw_prediction` on axes whose views are fixed; returns what it drew (with the
+    legends and the measurement-space title), for a blitted step to replace."""
+    _, drawn = drawn_by(axes, lambda: draw_prediction(summary, n_samples=n_samples, axes=axes))
+    return drawn + [axes[1].title]
+
+
+def _line_limits(ax):
+    """((x min, x max), (y min, y max)) of the finite points of the lines on ``ax``."""
+    pts = np.vstack([line.get_xydata() for line in ax.lines])
+    pts = pts[np.isfinite(pts).all(axis=1)]
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    return (float(lo[0]), float(hi[0])), (float(lo[1]), float(hi[1]))
+
+
+def _measurement_view(limits, range_m: float):
+    """Measurement space's view around data of these limits ((bearing deg), (range m)): half
+    their span on each side, and room for the landmark to move 1.5 m (three slider steps)."""
+    (x0, x1), (y0, y1) = limits
+    px = 0.5 * (x1 - x0) + math.degrees(1.5 / max(range_m, 1.5))
+    py = 0.5 * (y1 - y0) + 1.5
+    return (x0 - px, x1 + px), (y0 - py, y1 + py)
+
+
+def _holds(view, limits) -> bool:
+    """Whether a view shows data of these limits well: inside it, and on each axis at least
+    a quarter of its span (else measurement space is drawn anew around them)."""
+    return all(v0 <= d0 and d1 <= v1 and (d1 - d0) >= 0.25 * (v1 - v0)
+               for (v0, v1), (d0, d1) in zip(view, limits))
 
 
 def jacobian_sparsity_figure(H_full, n_landmarks: int, seen: int):

@@ -22,7 +22,8 @@ from ..data.records import Gps
 from ..evaluation.trajectory import TrajectoryErrors, trajectory_errors
 from ..evaluation.residuals import ROUNDING, bound_text
 from ..models.uncertainty import ellipse_curves
-from ..plots.style import FIG_WIDTH, figure, show_widget_figure, widget_figure
+from ..plots.blit import Blit, drawn_by
+from ..plots.style import FIG_WIDTH, figure, show_png, widget_figure
 from ..plots.style import notebook_setup as setup
 from ..slam.results import SlamResult
 
@@ -184,6 +185,7 @@ def run_scrubber(result: SlamResult, gps: Gps, *, start: float | None = None, st
             raise ValueError(f"outliers must flag each of the {gps.t.size} GPS fixes, got {outliers.shape}")
         err_outliers = outliers[np.searchsorted(gps.t, errors.t)]
     holder = {}
+    views = []                  # the blitted figure (plots.blit.Blit), made at the first draw
 
     def draw(t: int) -> None:
         s = run_snapshot(result, gps, float(t), errors=errors, first_seen=first_seen)
@@ -192,16 +194,31 @@ def run_scrubber(result: SlamResult, gps: Gps, *, start: float | None = None, st
                if s["fix"] is None else f"error vs GPS {s['fix']['error']:.2f} m")
         print(f"t = {t} s, scan {s['scan']}: {s['landmarks']} landmarks mapped, position "
               f"sigma {s['sigma_xy']:.2f} m; {fix}")
-        fig, (a1, a2) = widget_figure(1, 2, figsize=(FIG_WIDTH, 5.2), width_ratios=[1, 1.2],
-                                      layout="constrained")
-        draw_run(result, gps, float(t), a1, first_seen=first_seen, outliers=outliers)
-        draw_gps_errors(errors, a2, t=float(t), outliers=err_outliers)
-        show_widget_figure(fig)  # not pyplot: see widget_figure
+        # Both views are fixed (the map frames the whole run, the errors panel every fix):
+        # a step draws the map up to t and moves the time line over the kept picture.
+        if not views:
+            fig, (a1, a2) = widget_figure(1, 2, figsize=(FIG_WIDTH, 5.2), width_ratios=[1, 1.2],
+                                          layout="constrained")  # not pyplot: see widget_figure
+            _, moving = drawn_by([a1], lambda: draw_run(result, gps, float(t), a1,
+                                                        first_seen=first_seen, outliers=outliers))
+            draw_gps_errors(errors, a2, t=float(t), outliers=err_outliers)
+            views[:] = [Blit(fig, moving + [a2.lines[-1]])]      # the time line drawn last
+        else:
+            view = views[0]
+            a1, a2 = view.fig.axes
+            line = view.moving[-1]
+            view.clear(keep=(line,))
+            _, moving = drawn_by([a1], lambda: draw_run(result, gps, float(t), a1,
+                                                        first_seen=first_seen, outliers=outliers))
+            line.set_xdata([float(t), float(t)])
+            view.set_moving(moving + [line])
+        show_png(views[0].png())
 
     slider = IntSlider(value=start, min=lo, max=hi, step=step, description="t [s]",
                        continuous_update=False)
     widget = interactive(draw, t=slider)
     widget.holder = holder
+    widget.views = views
     return widget
 
 
