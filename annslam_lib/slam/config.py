@@ -86,6 +86,14 @@ class SlamConfig:
         ``landmark_probation`` seconds of its creation; at the end of the run the
         still-tentative ones below the count are dropped too. 1 keeps every landmark.
         landmark_probation: the probation period, s.
+        first_estimates: False (the default, the standard EKF: every Jacobian at the current
+        estimate) or True, first-estimates Jacobians (FEJ; Huang, Mourikis & Roumeliotis
+        2008): the observation Jacobians at each landmark's first estimate (the one it was
+        added with) and the motion Jacobian at the pose predicted before the last update, so
+        that the filter's linearised model keeps the three unobservable directions of SLAM
+        (global translation and rotation) and gains no information along them (``evaluation.consistency.monte_carlo``
+        measures both).
+        The innovations still use the current estimates. The efficient backend only.
     The map
         map_mode: 'slam' (the default: the filter builds the map from nothing) or 'known'
         (EKF localisation, chapter 04a: the dataset's surveyed map ``Dataset.beacons``, the
@@ -133,6 +141,7 @@ class SlamConfig:
     new_landmark_prob: float = 0.99999
     landmark_min_observations: int = 1
     landmark_probation: float = 2.0
+    first_estimates: bool = False
     map_mode: str = "slam"
     known_map_sigma: float = 0.0
     gps_mode: str = "init"
@@ -170,6 +179,7 @@ class SlamConfig:
                              f"gate_prob ({self.gate_prob})")
         _checks.integer(o + "landmark_min_observations", self.landmark_min_observations, lo=1)
         _checks.integer(o + "checkpoint_every", self.checkpoint_every, lo=1)
+        _checks.flag(o + "first_estimates", self.first_estimates)
         _checks.choice(o + "gps_mode", self.gps_mode, GPS_MODES)
         _checks.choice(o + "map_mode", self.map_mode, MAP_MODES)
         _checks.choice(o + "motion_model", self.motion_model, MOTION_MODELS)

@@ -45,6 +45,23 @@ Process noise (notebook 05 "process noise")
     tau Delta_k B Q_c B^T, so the noise added over one odometry interval does not depend
     on how many events split it (and equals the ACFR value when none does).
 
+First-estimates Jacobians (``fej=True``; Huang, Mourikis & Roumeliotis 2008, 2010)
+    SLAM cannot observe where the whole scene lies: moving the vehicle and every landmark
+    by one rigid motion changes no odometry and no measurement. The EKF linearises each
+    observation at the current landmark estimate and each prediction at the latest pose;
+    because these estimates change between steps, the linearised model of the filter sees
+    the global heading as observable and gains information it cannot have: it becomes
+    over-confident. FEJ evaluates every observation Jacobian at the landmark's FIRST
+    estimate (kept from :meth:`augment`) and the motion Jacobian of the first prediction
+    after an update at the pose predicted before it, F = [[1, 0, -(y' - y)], [0, 1, x' - x],
+    [0, 0, 1]] with (x, y) the prior and (x', y') the predicted laser position: the
+    compounded (f0, f1) take the update's position correction (``_cx``, ``_cy``), and so does
+    the heading column of a new landmark's Jacobian (:meth:`augment`). Gating, update and
+    the innovation covariance use the same Jacobians; innovations use the current estimates.
+    Why it matters, measured: with FEJ and no GPS, the heading's variance never falls below
+    its initial value (nothing observes the global heading); the standard filter's does
+    (``tests/test_fej.py``).
+
 Models used here as fast, unchecked copies (each beside its model, with the list of places
 to change together): the Euler and midpoint step and its noise (``models.motion``,
 "fast copies"), the range-bearing prediction (``models.observation.observe_fast``), the
@@ -56,6 +73,7 @@ import math
 
 import numpy as np
 
+from .. import _checks
 from ..models.geometry import wrap_angle, wrap_difference
 from ..models.observation import inverse_observe, observe_fast
 from ..perception.association import mahalanobis
@@ -92,10 +110,14 @@ class EkfSlam:
     its upper triangle up to date.
     """
 
-    def __init__(self, x0, P0, vehicle: Vehicle, motion_model: str = "euler") -> None:
+    def __init__(self, x0, P0, vehicle: Vehicle, motion_model: str = "euler", *,
+                 fej: bool = False) -> None:
         x0, P0 = check_initial(x0, P0, vehicle, motion_model)
         _load_linalg()
         self._mid = motion_model == "midpoint"
+        self.fej = _checks.flag("EkfSlam fej", fej)
+        self._first = np.empty((0, 2))     # the landmarks' first estimates (fej)
+        self._cx = self._cy = 0.0          # position corrections since the last prediction
         self.vehicle = vehicle
         self._a, self._b, self._L = vehicle.a, vehicle.b, vehicle.L
         self.x = x0.copy()
@@ -153,6 +175,7 @@ class EkfSlam:
         px, py, phi = self._px, self._py, self._pphi
         p00, p01, p02, p11, p12, p22 = self._p
         F0, F1 = self._f0, self._f1
+        cx, cy = self._cx, self._cy        # nonzero only with fej, after an update
         cos, sin = math.cos, math.sin
         n = 0
         poses = [] if record else None
@@ -167,8 +190,9 @@ class EkfSlam:
                 lx = a * s + b * c
                 ly = a * c - b * s
                 vx = v * c - w * lx
-                f0 = dt * (-v * s - w * ly)
-                f1 = dt * vx
+                f0 = dt * (-v * s - w * ly) - cy
+                f1 = dt * vx + cx
+                cx = cy = 0.0
                 px += dt * vx
                 py += dt * (v * s + w * ly)
                 phi += dt * w
@@ -199,6 +223,7 @@ class EkfSlam:
             self._px, self._py, self._pphi = px, py, phi
             self._p = [p00, p01, p02, p11, p12, p22]
             self._f0, self._f1 = F0, F1
+            self._cx = self._cy = 0.0
             self._dirty = True
         return u, t, n, poses
 
@@ -284,7 +309,15 @@ class EkfSlam:
             raise ValueError("a landmark coincides with the sensor position (range < 1e-9 m)")
         bearing = J[1]
         bearing[:] = wrap_difference(np.arctan2(d.imag, d.real) + (_PI / 2 - self._pphi))
-        ir = np.divide(1.0, r, out=J[4])
+        if self.fej:                                       # Jacobians at the first estimates
+            d = self._first.view(complex).ravel() - complex(self._px, self._py)
+            rf = np.abs(d)
+            if not rf.min() >= 1e-9:
+                raise ValueError("a landmark's first estimate coincides with the sensor position "
+                                 "(range < 1e-9 m): its first-estimates Jacobian is undefined")
+            ir = np.divide(1.0, rf, out=J[4])
+        else:
+            ir = np.divide(1.0, r, out=J[4])
         u = d * ir                                         # unit vector u_x + i u_y
         J[2], J[3] = u.real, u.imag
         p00, p01, p02, p11, p12, p22 = self._p
@@ -353,7 +386,15 @@ class EkfSlam:
             J = om[4][:, lm_list].tolist()                 # from the gating, same state
         else:
             zhat, _, Hl = observe_fast(self.x[:3], self.landmarks()[lm_list])
-            J = np.vstack([zhat.T, Hl[:, 0].T, 1.0 / zhat[:, 0]]).tolist()
+            J = np.vstack([zhat.T, Hl[:, 0].T, 1.0 / zhat[:, 0]])
+            if self.fej:                                   # u and 1/r at the first estimates
+                d = self._first[lm_list] - self.x[:2]
+                rf = np.hypot(d[:, 0], d[:, 1])
+                if not rf.min() >= 1e-9:
+                    raise ValueError("a landmark's first estimate coincides with the sensor "
+                                     "position: its first-estimates Jacobian is undefined")
+                J[2:4], J[4] = (d / rf[:, None]).T, 1.0 / rf
+            J = J.tolist()
         # H restricted to the columns cols, filled as a flat list (m is a handful: Python
         # floats beat a dozen small numpy calls): per observation a range row
         # [-u^T, 0 | u^T at its landmark] and a bearing row [-w^T/r, -1 | w^T/r].
@@ -417,7 +458,11 @@ class EkfSlam:
             return nis, nu.size
         # W = P H^T L^-T (n, k), Fortran-contiguous: solve W L^T = (HP)^T in place.
         W = dtrsm(1.0, Lc, HP.T, side=1, lower=1, trans_a=1, overwrite_b=1)
-        self.x += W @ e
+        dx = W @ e
+        self.x += dx
+        if self.fej:                       # the next prediction's Jacobian starts at the prior
+            self._cx += float(dx[0])
+            self._cy += float(dx[1])
         # P -= W W^T in place, on the upper triangle only (half the flops and traffic of a
         # full dgemm; dsyrk runs near the core's peak at n = 673): P.T is F-contiguous, so dsyrk
         # writes into P itself, and the Fortran lower triangle of P.T is P's upper one.
@@ -438,6 +483,7 @@ class EkfSlam:
         self.flush()
         N0 = self.n_landmarks
         self.x, self.P = with_known_landmarks(self.x, self.P, xy, sigma)
+        self._first = self.x[3:].reshape(-1, 2).copy()
         self._om = None
         return np.arange(N0, self.n_landmarks)
 
@@ -452,6 +498,11 @@ class EkfSlam:
         if k == 0:
             return np.empty(0, dtype=np.int64)
         lm, Jp, Jz = inverse_observe(self.x[:3], z)
+        if self.fej and (self._cx or self._cy):
+            # the heading column at the prior position, as the prediction's (module docstring):
+            # d l / d phi = (-(l_y - y), l_x - x) with (x, y) before this scan's update
+            Jp[:, 0, 2] -= self._cy
+            Jp[:, 1, 2] += self._cx
         n = self.x.size
         P = self.P
         Jp2 = Jp.reshape(2 * k, 3)
@@ -468,6 +519,7 @@ class EkfSlam:
         Pn[n:, n:] = 0.5 * (Pnn + Pnn.T)
         self.P = Pn
         self.x = np.concatenate([self.x, lm.ravel()])
+        self._first = np.concatenate([self._first, lm.reshape(-1, 2)])
         self._om = None
         return np.arange(N0, N0 + k)
 
@@ -497,6 +549,7 @@ class EkfSlam:
             r0 += b - a
         self.P = Pn
         self.x = self.x[keep]
+        self._first = np.delete(self._first, idx, axis=0)
         self._om = None
 
     def health(self) -> tuple[float, float]:

@@ -374,7 +374,11 @@ def _run(dataset, config, progress, backend, landmark_model=None, inspect=None) 
         raise ValueError("the dataset has no odometry")
     pose0, init_info = _initial(ds, cfg)
     P0 = np.diag([cfg.initial_sigma_xy**2, cfg.initial_sigma_xy**2, cfg.initial_sigma_phi**2])
-    filt = make(pose0, P0, ds.vehicle, cfg.motion_model)
+    if cfg.first_estimates and backend != "efficient":
+        raise ValueError("SlamConfig.first_estimates (FEJ) is implemented by the efficient "
+                         "backend only")
+    filt = (make(pose0, P0, ds.vehicle, cfg.motion_model, fej=True) if cfg.first_estimates
+            else make(pose0, P0, ds.vehicle, cfg.motion_model))
     book = LandmarkBook(cfg.landmark_min_observations, cfg.landmark_probation)
     if cfg.map_mode == "known":                # EKF localisation on the surveyed map
         if ds.beacons is None:
