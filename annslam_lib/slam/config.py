@@ -20,8 +20,9 @@ __all__ = ["SlamConfig", "GPS_MODES", "ASSOCIATIONS", "MAP_MODES", "MOTION_MODEL
 GPS_MODES = ("none", "init", "all")
 
 #: Data association: 'nn' = chi-square gated nearest neighbour (``association``);
+#: 'jcbb' = joint compatibility branch and bound (``perception.jcbb``);
 #: 'truth' = the detections' true landmark ids (simulator only).
-ASSOCIATIONS = ("nn", "truth")
+ASSOCIATIONS = ("nn", "jcbb", "truth")
 
 #: What the filter knows of the map (``SlamConfig.map_mode``): 'slam' = nothing, it builds
 #: the map; 'known' = the dataset's surveyed map, held fixed (EKF localisation, chapter 04a).
@@ -72,8 +73,13 @@ class SlamConfig:
         pseudo-measurement with the model's noise, which replaces sigma_range and
         sigma_bearing; module docstring).
     Data association
-        association: 'nn' (gated nearest neighbour, ``association.associate``) or
-        'truth' (simulator's landmark ids: known data association).
+        association: 'nn' (gated nearest neighbour, ``association.associate``), 'jcbb'
+        (the scan's jointly compatible hypothesis with the most pairings,
+        ``perception.jcbb``: the same gate for each pairing, the joint NIS below
+        chi2.ppf(gate_prob, 2k); a search stopped at ``jcbb_max_nodes`` keeps its best
+        hypothesis so far and is counted in ``counts['jcbb_truncated']``; the efficient
+        backend only) or 'truth' (simulator's landmark ids: known data association).
+        jcbb_max_nodes: the JCBB search's bound per scan.
         gate_prob: an observation is associated only if its squared Mahalanobis distance
         d2 to the landmark is below chi2.ppf(gate_prob, 2).
         new_landmark_prob: an observation whose d2 to EVERY landmark exceeds
@@ -137,6 +143,7 @@ class SlamConfig:
     feature_source: str = "auto"
     landmark_model: str = "inverse"
     association: str = "nn"
+    jcbb_max_nodes: int = 10_000
     gate_prob: float = 0.99
     new_landmark_prob: float = 0.99999
     landmark_min_observations: int = 1
@@ -179,6 +186,7 @@ class SlamConfig:
                              f"gate_prob ({self.gate_prob})")
         _checks.integer(o + "landmark_min_observations", self.landmark_min_observations, lo=1)
         _checks.integer(o + "checkpoint_every", self.checkpoint_every, lo=1)
+        _checks.integer(o + "jcbb_max_nodes", self.jcbb_max_nodes, lo=1)
         _checks.flag(o + "first_estimates", self.first_estimates)
         _checks.choice(o + "gps_mode", self.gps_mode, GPS_MODES)
         _checks.choice(o + "map_mode", self.map_mode, MAP_MODES)

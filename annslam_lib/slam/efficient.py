@@ -412,6 +412,36 @@ class EkfSlam:
         return self._correct(cols, np.array(Hc).reshape(2 * m, c), np.array(nu),
                              np.array([sigma_range**2, sigma_bearing**2] * m))
 
+    def joint_prediction(self, lm) -> tuple[np.ndarray, np.ndarray]:
+        """Predicted measurements zhat (L, 2) of the distinct landmarks ``lm`` and the joint
+        covariance C = H P H^T (2L, 2L) of those predictions, with every correlation (no R):
+        what joint compatibility (``perception.jcbb``) tests hypotheses against. Uses the
+        Jacobians of the last gating from this state (as :meth:`update` does)."""
+        self.flush()
+        lm_list = np.asarray(lm, dtype=np.int64).ravel().tolist()
+        if len(set(lm_list)) != len(lm_list) or (
+                lm_list and not 0 <= min(lm_list) <= max(lm_list) < self.n_landmarks):
+            raise ValueError(f"joint_prediction: landmark indices must be distinct, in "
+                             f"0..{self.n_landmarks - 1}")
+        m = len(lm_list)
+        if m == 0:
+            return np.empty((0, 2)), np.empty((0, 0))
+        om = self._om
+        if om is None or om[:4] != [self._px, self._py, self._pphi, self.n_landmarks]:
+            raise RuntimeError("joint_prediction needs the gating of this state first "
+                               "(innovation_d2 or observation_model)")
+        r, bearing, ux, uy, ir = om[4][:, lm_list]
+        cols = [0, 1, 2] + [c for j in lm_list for c in (3 + 2 * j, 4 + 2 * j)]
+        Hc = np.zeros((2 * m, 3 + 2 * m))
+        k = np.arange(m)
+        wx, wy = -uy * ir, ux * ir
+        Hc[2 * k, 0], Hc[2 * k, 1], Hc[2 * k, 3 + 2 * k], Hc[2 * k, 4 + 2 * k] = -ux, -uy, ux, uy
+        Hc[2 * k + 1, 0], Hc[2 * k + 1, 1], Hc[2 * k + 1, 2] = -wx, -wy, -1.0
+        Hc[2 * k + 1, 3 + 2 * k], Hc[2 * k + 1, 4 + 2 * k] = wx, wy
+        HP = Hc @ self._rows(cols)[:, cols]
+        C = HP @ Hc.T
+        return np.column_stack([r, bearing]), 0.5 * (C + C.T)
+
     def gps_update(self, xy, sigma_gps: float, gate: float = math.inf) -> tuple[float, bool]:
         """Position fix of the laser point: H = [I2 0 ...]. Rejected (no change) if its NIS
         exceeds ``gate``. Returns (NIS, accepted)."""

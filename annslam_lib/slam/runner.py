@@ -48,7 +48,8 @@ from ..data.records import Dataset, Detections
 from ..data.screening import screen
 from ..evaluation.consistency import chi2_quantile
 from ..models.motion import control_table
-from ..perception.association import associate_fast
+from ..perception.association import NEW, REJECTED, associate_fast
+from ..perception.jcbb import jcbb
 from .base import FilterBackend, LandmarkModel
 from .config import SlamConfig
 from .results import STATUS, ObservationLog, SlamResult, _landmark_history, _nis_arrays
@@ -300,6 +301,9 @@ class _ScanStep:
         self.gate = chi2_quantile(cfg.gate_prob, 2)
         self.new_thr = chi2_quantile(cfg.new_landmark_prob, 2)
         self.truth = cfg.association == "truth"
+        self.jcbb = cfg.association == "jcbb"
+        self.gate_prob, self.max_nodes = cfg.gate_prob, cfg.jcbb_max_nodes
+        self.truncated = 0                        # JCBB searches stopped at their bound
         self.known = cfg.map_mode == "known"      # localisation: nothing is ever added
 
     def __call__(self, k: int, t: float, prior: tuple) -> tuple[float, int] | None:
@@ -320,6 +324,8 @@ class _ScanStep:
                                  f"scan {k}: need finite ({use.size}, 2) with range > 0")
         if self.truth:
             assign = book.truth_assign(d.det.landmark_id[use].tolist())
+        elif len(book) and self.jcbb:
+            assign = self._joint(z, filt.innovation_d2(z, self.sr, self.sb))
         elif len(book):
             assign = associate_fast(filt.innovation_d2(z, self.sr, self.sb), self.gate,
                                     self.new_thr).tolist()
@@ -346,6 +352,20 @@ class _ScanStep:
                 d.uid[use_l[i]] = uid
         book.prune(filt, t, False)
         return result
+
+    def _joint(self, z, d2) -> list[int]:
+        """JCBB over the landmarks in some detection's gate; a detection JCBB leaves unpaired
+        is new if it is far from every landmark (as with 'nn'), else rejected."""
+        assign = np.where(d2.min(axis=1) > self.new_thr, NEW, REJECTED)
+        cand = np.flatnonzero((d2 <= self.gate).any(axis=0))
+        if cand.size:
+            zhat, C = self.filt.joint_prediction(cand)
+            res = jcbb(z, zhat, C, np.diag([self.sr**2, self.sb**2]), gate_prob=self.gate_prob,
+                       joint_prob=self.gate_prob, max_nodes=self.max_nodes)
+            self.truncated += not res.complete
+            paired = res.pairs >= 0
+            assign[paired] = cand[res.pairs[paired]]
+        return assign.tolist()
 
 
 def _run(dataset, config, progress, backend, landmark_model=None, inspect=None) -> SlamResult:
@@ -374,6 +394,9 @@ def _run(dataset, config, progress, backend, landmark_model=None, inspect=None) 
         raise ValueError("the dataset has no odometry")
     pose0, init_info = _initial(ds, cfg)
     P0 = np.diag([cfg.initial_sigma_xy**2, cfg.initial_sigma_xy**2, cfg.initial_sigma_phi**2])
+    if cfg.association == "jcbb" and backend != "efficient":
+        raise ValueError("SlamConfig.association = 'jcbb' is implemented by the efficient "
+                         "backend only")
     if cfg.first_estimates and backend != "efficient":
         raise ValueError("SlamConfig.first_estimates (FEJ) is implemented by the efficient "
                          "backend only")
@@ -465,6 +488,8 @@ def _run(dataset, config, progress, backend, landmark_model=None, inspect=None) 
     book.prune(filt, cur_t, True)
     checkpoint(scans_done[-1] if scans_done else -1, cur_t)
     counts["landmarks_removed"] = book.removed
+    if cfg.association == "jcbb":
+        counts["jcbb_truncated"] = scan_step.truncated
     return _assemble(filt, book, dets, cfg, counts, traj_rows, cov_rows, scans_done, pose_prior,
                      odo_rows, nis_rows, health_rows, pose0, init_info, t_start)
 

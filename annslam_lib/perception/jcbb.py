@@ -1,0 +1,155 @@
+"""Joint compatibility branch and bound (JCBB; Neira & Tardós 2001): association of a whole
+scan at once (``SlamConfig.association = 'jcbb'``).
+
+Gated nearest neighbour (``association.associate``) judges each measurement alone: two
+measurements may each fall in a landmark's gate while the pair cannot both be right, because
+their innovations share the vehicle's error. A hypothesis H pairs measurements i with
+landmarks j_i (or with nothing); its innovations stacked, nu_H, have the JOINT covariance
+
+    S_H = H_H P H_H^T + R_H      (the candidates' block of C = H P H^T, plus R per pairing)
+
+and H is jointly compatible if its joint NIS nu_H^T S_H^-1 nu_H is below chi2.ppf(p, 2k) for
+its k pairings. JCBB searches the hypotheses depth first, measurement by measurement, trying
+each individually compatible landmark (nearest first) and then "no landmark", pruning a
+branch that can no longer pair as many measurements as the best hypothesis found; the best is
+the one with the most pairings, and among those the smallest joint NIS. The search is
+exponential in the worst case, so it is bounded: after ``max_nodes`` nodes it stops and
+returns the best hypothesis found so far, flagged ``complete=False`` (the run loop counts such
+scans).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import _checks
+from ..models.uncertainty import chi2_quantile
+
+__all__ = ["JcbbResult", "jcbb", "joint_nis"]
+
+
+@dataclass(frozen=True)
+class JcbbResult:
+    """pairs (n,): the candidate paired with each measurement, -1 for none; pairings: how many;
+    nis: the hypothesis' joint NIS (0 without pairings); nodes: hypotheses visited; complete:
+    False if the search stopped at its node limit (the best found so far is returned)."""
+
+    pairs: np.ndarray
+    pairings: int
+    nis: float
+    nodes: int
+    complete: bool
+
+
+def _innovations(z, zhat) -> np.ndarray:
+    """nu[i, j] = z_i - zhat_j with the bearing wrapped to (-pi, pi]."""
+    nu = z[:, None, :] - zhat[None, :, :]
+    nu[..., 1] = math.pi - (math.pi - nu[..., 1]) % (2.0 * math.pi)
+    return nu
+
+
+def joint_nis(z, zhat, C, R, pairs) -> float:
+    """Joint NIS of the hypothesis ``pairs`` (measurement i paired with candidate pairs[i],
+    -1 for none): nu_H^T (C_H + R_H)^-1 nu_H (module docstring). 0.0 without pairings."""
+    z, zhat, C, R = _check(z, zhat, C, R)
+    pairs = np.asarray(pairs, dtype=np.int64)
+    if pairs.shape != (z.shape[0],) or np.any(pairs >= zhat.shape[0]) or np.any(pairs < -1):
+        raise ValueError(f"pairs must give each of the {z.shape[0]} measurements a candidate "
+                         f"0..{zhat.shape[0] - 1} or -1")
+    used = pairs[pairs >= 0]
+    if used.size != np.unique(used).size:
+        raise ValueError("a candidate is paired with two measurements")
+    return _nis(_innovations(z, zhat), C, R, [(i, int(j)) for i, j in enumerate(pairs) if j >= 0])
+
+
+def _nis(nu_all, C, R, hyp) -> float:
+    if not hyp:
+        return 0.0
+    idx = np.array([[2 * j, 2 * j + 1] for _, j in hyp]).ravel()
+    S = C[np.ix_(idx, idx)] + np.kron(np.eye(len(hyp)), R)
+    nu = np.concatenate([nu_all[i, j] for i, j in hyp])
+    try:
+        L = np.linalg.cholesky(S)
+    except np.linalg.LinAlgError as exc:
+        raise ValueError("a joint innovation covariance is not positive definite") from exc
+    e = np.linalg.solve(L, nu)
+    return float(e @ e)
+
+
+def _check(z, zhat, C, R):
+    z = _checks.array("z", z, (2,)).reshape(-1, 2)
+    zhat = _checks.array("zhat", zhat, (2,)).reshape(-1, 2)
+    L = zhat.shape[0]
+    C = _checks.array("C", C)
+    if C.shape != (2 * L, 2 * L):
+        raise ValueError(f"C must be the ({2 * L}, {2 * L}) joint covariance of {L} candidates' "
+                         f"predictions, got shape {C.shape}")
+    R = _checks.covariance("R", R, 2)
+    return z, zhat, C, R
+
+
+def jcbb(z, zhat, C, R, *, gate_prob: float = 0.99, joint_prob: float = 0.99,
+         max_nodes: int = 10_000) -> JcbbResult:
+    """The jointly compatible hypothesis with the most pairings (then the smallest joint NIS).
+
+    z (n, 2): the scan's measurements (range, bearing); zhat (L, 2): the candidates'
+    predicted measurements; C (2L, 2L): the joint covariance H P H^T of those predictions
+    (vehicle and landmark uncertainty with every correlation; without R); R (2, 2): the
+    noise of one measurement. A pairing (i, j) is tried only if it is individually compatible
+    (d2 <= chi2.ppf(gate_prob, 2)); a hypothesis of k pairings is kept only if its joint NIS
+    is <= chi2.ppf(joint_prob, 2k). ``max_nodes``: the search's bound (module docstring)."""
+    z, zhat, C, R = _check(z, zhat, C, R)
+    _checks.probability("gate_prob", gate_prob)
+    _checks.probability("joint_prob", joint_prob)
+    max_nodes = _checks.integer("max_nodes", max_nodes, lo=1)
+    n, L = z.shape[0], zhat.shape[0]
+    nu_all = _innovations(z, zhat)
+    gate = chi2_quantile(gate_prob, 2)
+    joint_gate = [0.0] + [float(chi2_quantile(joint_prob, 2 * k)) for k in range(1, n + 1)]
+    options = []                                   # individually compatible, nearest first
+    for i in range(n):
+        d2 = []
+        for j in range(L):
+            S = C[2 * j:2 * j + 2, 2 * j:2 * j + 2] + R
+            nu = nu_all[i, j]
+            d2.append(float(nu @ np.linalg.solve(S, nu)))
+        options.append([j for j in np.argsort(d2, kind="stable").tolist() if d2[j] <= gate])
+
+    best = {"hyp": [], "nis": 0.0}
+    nodes = 0
+    complete = True
+
+    def search(i: int, hyp: list, used: set, nis: float) -> None:
+        nonlocal nodes, complete
+        if not complete:
+            return
+        nodes += 1
+        if nodes > max_nodes:
+            complete = False
+            return
+        if i == n:
+            k, kb = len(hyp), len(best["hyp"])
+            if k > kb or (k == kb and nis < best["nis"]):
+                best["hyp"], best["nis"] = list(hyp), nis
+            return
+        for j in options[i]:
+            if j in used:
+                continue
+            trial = hyp + [(i, j)]
+            t_nis = _nis(nu_all, C, R, trial)
+            if t_nis <= joint_gate[len(trial)]:
+                used.add(j)
+                search(i + 1, trial, used, t_nis)
+                used.discard(j)
+        # "no landmark" for measurement i, while it can still reach the best's pairings
+        if len(hyp) + (n - i - 1) >= len(best["hyp"]):
+            search(i + 1, hyp, used, nis)
+
+    search(0, [], set(), 0.0)
+    pairs = np.full(n, -1, dtype=np.int64)
+    for i, j in best["hyp"]:
+        pairs[i] = j
+    return JcbbResult(pairs=pairs, pairings=len(best["hyp"]), nis=best["nis"],
+                      nodes=min(nodes, max_nodes), complete=complete)
