@@ -14,9 +14,9 @@ R = np.diag([0.1**2, math.radians(1.0)**2])
 
 def brute_force(z, zhat, C, R, gate_prob=0.99, joint_prob=0.99):
     """Every hypothesis, written plainly: the individually and jointly compatible one with the
-    most pairings, then the smallest joint NIS."""
+    most pairings, then the smallest joint NIS; and every compatible one as many pairings."""
     n, L = z.shape[0], zhat.shape[0]
-    best, best_key = None, None
+    best, best_key, hyps = None, None, []
     for pairs in itertools.product(range(-1, L), repeat=n):
         used = [j for j in pairs if j >= 0]
         if len(used) != len(set(used)):
@@ -34,9 +34,11 @@ def brute_force(z, zhat, C, R, gate_prob=0.99, joint_prob=0.99):
         if used and nis > chi2.ppf(joint_prob, 2 * len(used)):
             continue
         key = (-len(used), nis)
+        hyps.append((len(used), np.array(pairs)))
         if best_key is None or key < best_key:
             best, best_key = np.array(pairs), key
-    return best, -best_key[0], best_key[1]
+    ties = [p for k, p in hyps if k == -best_key[0]]
+    return best, -best_key[0], best_key[1], ties
 
 
 def scene(rng, n_lm=4, n_z=4, pose_sigma=(0.3, 0.3, 0.05)):
@@ -68,11 +70,12 @@ def scene(rng, n_lm=4, n_z=4, pose_sigma=(0.3, 0.3, 0.05)):
 def test_jcbb_finds_the_hypothesis_brute_force_finds(seed):
     rng = np.random.default_rng(seed)
     z, zhat, C, _ = scene(rng, n_lm=int(rng.integers(2, 5)), n_z=int(rng.integers(1, 4)))
-    ref, pairings, nis = brute_force(z, zhat, C, R)
+    ref, pairings, nis, ties = brute_force(z, zhat, C, R)
     got = jcbb.jcbb(z, zhat, C, R)
     assert got.complete and got.pairings == pairings
-    np.testing.assert_array_equal(got.pairs, ref)
+    np.testing.assert_array_equal(got.pairs, ref)     # the smallest joint NIS among the ties
     assert got.nis == pytest.approx(nis, rel=1e-9, abs=1e-12)
+    assert len(ties) >= 1
 
 
 def test_jcbb_rejects_what_nearest_neighbour_pairs_wrongly():

@@ -2,6 +2,7 @@
 noise statistics, and consistency with the kinematics and observation models."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -345,3 +346,30 @@ def test_dataset_shape():
     assert ds.truth.poses.shape == (len(ds.odometry), 4)
     assert np.array_equal(ds.truth.landmarks, ds.beacons) and ds.beacons.shape == (15, 2)
     assert ds.laser.ranges.shape == (len(ds.laser), 361)
+
+
+def test_clutter_adds_spurious_detections_and_leaves_the_rest_alone(default):
+    """clutter_rate: Poisson spurious detections after each scan's true ones, uniform over
+    the range window and the field of view, landmark_id -1; every other stream unchanged."""
+    from scipy.stats import kstest
+    cfg = default.info["config"]
+    c = simulate(dataclasses.replace(cfg, clutter_rate=2.0))
+    da, dc = default.detections, c.detections
+    real = dc.landmark_id >= 0
+    np.testing.assert_array_equal(c.odometry.speed, default.odometry.speed)
+    per_scan = np.diff(dc.offsets) - np.diff(da.offsets)
+    n = per_scan.size
+    # Poisson(2): mean 2 within 4 standard errors, variance equal to the mean within 20 %
+    assert abs(per_scan.mean() - 2.0) < 4 * math.sqrt(2.0 / n)
+    assert per_scan.var() == pytest.approx(2.0, rel=0.2)
+    for k in range(n):         # the scan's own detections, unchanged, among its clutter by bearing
+        sa, sc = slice(da.offsets[k], da.offsets[k + 1]), slice(dc.offsets[k], dc.offsets[k + 1])
+        mine = real[sc]
+        assert np.all(np.diff(dc.bearing[sc]) >= 0) and int((~mine).sum()) == per_scan[k]
+        got = sorted(zip(dc.landmark_id[sc][mine], dc.range[sc][mine], dc.bearing[sc][mine]))
+        assert got == sorted(zip(da.landmark_id[sa], da.range[sa], da.bearing[sa]))
+    r, b = dc.range[~real], dc.bearing[~real]
+    assert kstest(r, "uniform", args=(cfg.min_range, cfg.max_range - cfg.min_range)).pvalue > 1e-3
+    assert kstest(b, "uniform", args=(0.0, math.pi)).pvalue > 1e-3
+    with pytest.raises(ValueError, match="clutter_rate"):
+        SimConfig(clutter_rate=-1.0)

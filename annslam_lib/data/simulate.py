@@ -75,7 +75,7 @@ FILTER_DEFAULTS = dict(sigma_speed=0.05, sigma_steer=math.radians(1.0), sigma_ra
                        initial_sigma_phi=0.0)
 #: Independent random streams, in SeedSequence.spawn order (append only: reordering
 #: would change every simulated dataset).
-STREAMS = ("beacons", "speed", "steering", "gps", "range", "bearing", "laser")
+STREAMS = ("beacons", "speed", "steering", "gps", "range", "bearing", "laser", "clutter")
 
 
 @dataclass(frozen=True)
@@ -114,6 +114,12 @@ class SimConfig:
         range_scale and range_bias apply to its ranges.
         max_range (30 m, the Car Park extractor's limit) bounds detections and
         raw beacon returns; min_range (1 m) bounds detections.
+    Clutter (detections only, not the raw laser)
+        clutter_rate: spurious detections per scan on average (Poisson; 0, the default,
+        has none), uniform in range over [min_range, max_range] and in bearing over the
+        0..pi field of view, with landmark_id -1; each scan's detections are then ordered
+        by bearing, as a laser's are (a test for data association:
+        ``SlamConfig.association = 'truth'`` refuses them).
     GPS
         sigma_gps 0.05 m per axis; gps_dropouts: ((start, end), ...) seconds
         after t0 without fixes.
@@ -145,6 +151,7 @@ class SimConfig:
     range_scale: float = 1.0
     max_range: float = 30.0
     min_range: float = 1.0
+    clutter_rate: float = 0.0
     sigma_gps: float = 0.05
     gps_dropouts: tuple = ()
     raw_laser: bool = True
@@ -165,6 +172,7 @@ class SimConfig:
         for name in ("sigma_speed", "sigma_steer", "sigma_range", "sigma_bearing", "sigma_gps",
                      "beacon_min_sep", "min_range"):
             _checks.real(o + name, getattr(self, name), lo=0.0)
+        _checks.real(o + "clutter_rate", self.clutter_rate, lo=0.0, hi=100.0)
         for name in ("steering_offset", "range_bias", "bearing_offset", "t0"):
             _checks.real(o + name, getattr(self, name))
         _checks.real(o + "beacon_max_dist", self.beacon_max_dist)
@@ -450,6 +458,31 @@ def _streams(seed: int) -> dict[str, np.random.Generator]:
     return {name: np.random.default_rng(c) for name, c in zip(STREAMS, children)}
 
 
+def _with_clutter(det: Detections, rng: np.random.Generator, cfg: SimConfig) -> Detections:
+    """``det`` with Poisson(clutter_rate) spurious detections appended to each scan."""
+    n = det.t.size
+    k = rng.poisson(cfg.clutter_rate, n)
+    total = int(k.sum())
+    r = rng.uniform(cfg.min_range, cfg.max_range, total)
+    b = rng.uniform(0.0, np.pi, total)
+    real = np.diff(det.offsets)
+    offsets = np.concatenate([[0], np.cumsum(real + k)]).astype(np.int64)
+    scan = np.repeat(np.arange(n), real)
+    at_real = offsets[scan] + np.arange(real.sum()) - det.offsets[scan]
+    scan_c = np.repeat(np.arange(n), k)
+    at_clutter = offsets[scan_c] + real[scan_c] + np.arange(total) - np.repeat(np.cumsum(k) - k, k)
+    out = {}
+    for name, real_v, clutter_v in (("range", det.range, r), ("bearing", det.bearing, b),
+                                    ("diameter", det.diameter, np.full(total, np.nan)),
+                                    ("landmark_id", det.landmark_id, np.full(total, -1))):
+        v = np.empty(offsets[-1], dtype=np.asarray(real_v).dtype)
+        v[at_real], v[at_clutter] = real_v, clutter_v
+        out[name] = v
+    # each scan in bearing order, as a laser gives them: nothing tells clutter by its place
+    order = np.lexsort((out["bearing"], np.repeat(np.arange(n), real + k)))
+    return Detections(t=det.t, offsets=offsets, **{key: v[order] for key, v in out.items()})
+
+
 # --------------------------------------------------------------------------- simulate
 
 def simulate(config: SimConfig | None = None, *, beacons=None, **overrides) -> Dataset:
@@ -527,6 +560,8 @@ def simulate(config: SimConfig | None = None, *, beacons=None, **overrides) -> D
         z = np.zeros((n_scans, 0, 2))
     detections = _detections(scan_t, z, streams["range"].standard_normal((n_scans, m)),
                              streams["bearing"].standard_normal((n_scans, m)), cfg)
+    if cfg.clutter_rate > 0:
+        detections = _with_clutter(detections, streams["clutter"], cfg)
     laser = None
     if cfg.raw_laser:
         laser = _raw_laser(scan_t, z, streams["laser"].standard_normal((n_scans, LASER_ANGLES.size)), cfg)

@@ -11,8 +11,9 @@ landmarks j_i (or with nothing); its innovations stacked, nu_H, have the JOINT c
 and H is jointly compatible if its joint NIS nu_H^T S_H^-1 nu_H is below chi2.ppf(p, 2k) for
 its k pairings. JCBB searches the hypotheses depth first, measurement by measurement, trying
 each individually compatible landmark (nearest first) and then "no landmark", pruning a
-branch that can no longer pair as many measurements as the best hypothesis found; the best is
-the one with the most pairings, and among those the smallest joint NIS. The search is
+branch that can no longer pair as many measurements as the best hypothesis found (counting
+only measurements with some individually compatible landmark); the best has the most
+pairings, and among those the smallest joint NIS. The search is
 exponential in the worst case, so it is bounded: after ``max_nodes`` nodes it stops and
 returns the best hypothesis found so far, flagged ``complete=False`` (the run loop counts such
 scans).
@@ -92,7 +93,7 @@ def _check(z, zhat, C, R):
 
 def jcbb(z, zhat, C, R, *, gate_prob: float = 0.99, joint_prob: float = 0.99,
          max_nodes: int = 10_000) -> JcbbResult:
-    """The jointly compatible hypothesis with the most pairings (then the smallest joint NIS).
+    """The jointly compatible hypothesis with the most pairings, then the smallest joint NIS.
 
     z (n, 2): the scan's measurements (range, bearing); zhat (L, 2): the candidates'
     predicted measurements; C (2L, 2L): the joint covariance H P H^T of those predictions
@@ -108,15 +109,21 @@ def jcbb(z, zhat, C, R, *, gate_prob: float = 0.99, joint_prob: float = 0.99,
     nu_all = _innovations(z, zhat)
     gate = chi2_quantile(gate_prob, 2)
     joint_gate = [0.0] + [float(chi2_quantile(joint_prob, 2 * k)) for k in range(1, n + 1)]
-    options = []                                   # individually compatible, nearest first
-    for i in range(n):
-        d2 = []
-        for j in range(L):
-            S = C[2 * j:2 * j + 2, 2 * j:2 * j + 2] + R
-            nu = nu_all[i, j]
-            d2.append(float(nu @ np.linalg.solve(S, nu)))
-        options.append([j for j in np.argsort(d2, kind="stable").tolist() if d2[j] <= gate])
+    # individual compatibility, every (i, j) at once: the 2x2 blocks S_j = C_jj + R inverted
+    # in closed form; each measurement's options nearest first
+    j2 = 2 * np.arange(L)
+    a, b, c = C[j2, j2] + R[0, 0], C[j2, j2 + 1] + R[0, 1], C[j2 + 1, j2 + 1] + R[1, 1]
+    det = a * c - b * b
+    if L and not det.min() > 0.0:
+        raise ValueError("a candidate's innovation covariance is not positive definite")
+    nr, nb = nu_all[..., 0], nu_all[..., 1]
+    d2 = (c * nr * nr - 2.0 * b * nr * nb + a * nb * nb) / det
+    options = [[j for j in np.argsort(d2[i], kind="stable").tolist() if d2[i, j] <= gate]
+               for i in range(n)]
 
+    # could_pair[i]: how many of measurements i.. have an individually compatible landmark
+    # (the most pairings a branch at i can still add)
+    could_pair = np.concatenate([np.cumsum([bool(o) for o in options][::-1])[::-1], [0]]).tolist()
     best = {"hyp": [], "nis": 0.0}
     nodes = 0
     complete = True
@@ -143,8 +150,13 @@ def jcbb(z, zhat, C, R, *, gate_prob: float = 0.99, joint_prob: float = 0.99,
                 used.add(j)
                 search(i + 1, trial, used, t_nis)
                 used.discard(j)
-        # "no landmark" for measurement i, while it can still reach the best's pairings
-        if len(hyp) + (n - i - 1) >= len(best["hyp"]):
+        # "no landmark" for measurement i, while it can still reach the best's pairings,
+        # counting only the measurements after i that have a compatible landmark at all.
+        # Ties are searched (Neira & Tardós's bound is strict): the smallest joint NIS among
+        # them wins, whatever the measurements' order (with a strict bound the first found
+        # wins, and on the simulator with clutter in bearing order that paired 48 detections
+        # wrongly against nearest neighbour's 32; with ties searched, 33)
+        if len(hyp) + could_pair[i + 1] >= len(best["hyp"]):
             search(i + 1, hyp, used, nis)
 
     search(0, [], set(), 0.0)
