@@ -459,28 +459,22 @@ def _streams(seed: int) -> dict[str, np.random.Generator]:
 
 
 def _with_clutter(det: Detections, rng: np.random.Generator, cfg: SimConfig) -> Detections:
-    """``det`` with Poisson(clutter_rate) spurious detections appended to each scan."""
+    """``det`` with Poisson(clutter_rate) spurious detections added to each scan, every scan
+    then in bearing order, as a laser gives them, so that nothing tells clutter by its place
+    (ties: the true detections first)."""
     n = det.t.size
     k = rng.poisson(cfg.clutter_rate, n)
     total = int(k.sum())
     r = rng.uniform(cfg.min_range, cfg.max_range, total)
     b = rng.uniform(0.0, np.pi, total)
-    real = np.diff(det.offsets)
-    offsets = np.concatenate([[0], np.cumsum(real + k)]).astype(np.int64)
-    scan = np.repeat(np.arange(n), real)
-    at_real = offsets[scan] + np.arange(real.sum()) - det.offsets[scan]
-    scan_c = np.repeat(np.arange(n), k)
-    at_clutter = offsets[scan_c] + real[scan_c] + np.arange(total) - np.repeat(np.cumsum(k) - k, k)
-    out = {}
-    for name, real_v, clutter_v in (("range", det.range, r), ("bearing", det.bearing, b),
-                                    ("diameter", det.diameter, np.full(total, np.nan)),
-                                    ("landmark_id", det.landmark_id, np.full(total, -1))):
-        v = np.empty(offsets[-1], dtype=np.asarray(real_v).dtype)
-        v[at_real], v[at_clutter] = real_v, clutter_v
-        out[name] = v
-    # each scan in bearing order, as a laser gives them: nothing tells clutter by its place
-    order = np.lexsort((out["bearing"], np.repeat(np.arange(n), real + k)))
-    return Detections(t=det.t, offsets=offsets, **{key: v[order] for key, v in out.items()})
+    scan = np.concatenate([np.repeat(np.arange(n), np.diff(det.offsets)), np.repeat(np.arange(n), k)])
+    bearing = np.concatenate([det.bearing, b])
+    order = np.lexsort((bearing, scan))                # stable: scan, then bearing
+    offsets = np.concatenate([[0], np.cumsum(np.bincount(scan, minlength=n))]).astype(np.int64)
+    return Detections(t=det.t, offsets=offsets, range=np.concatenate([det.range, r])[order],
+                      bearing=bearing[order],
+                      diameter=np.concatenate([det.diameter, np.full(total, np.nan)])[order],
+                      landmark_id=np.concatenate([det.landmark_id, np.full(total, -1)])[order])
 
 
 # --------------------------------------------------------------------------- simulate

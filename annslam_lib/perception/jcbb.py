@@ -20,13 +20,14 @@ scans).
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from .. import _checks
+from ..models.geometry import wrap_difference
 from ..models.uncertainty import chi2_quantile
+from .association import mahalanobis_fast
 
 __all__ = ["JcbbResult", "jcbb", "joint_nis"]
 
@@ -45,9 +46,9 @@ class JcbbResult:
 
 
 def _innovations(z, zhat) -> np.ndarray:
-    """nu[i, j] = z_i - zhat_j with the bearing wrapped to (-pi, pi]."""
+    """nu[i, j] = z_i - zhat_j with the bearing difference wrapped."""
     nu = z[:, None, :] - zhat[None, :, :]
-    nu[..., 1] = math.pi - (math.pi - nu[..., 1]) % (2.0 * math.pi)
+    nu[..., 1] = wrap_difference(nu[..., 1])
     return nu
 
 
@@ -109,15 +110,10 @@ def jcbb(z, zhat, C, R, *, gate_prob: float = 0.99, joint_prob: float = 0.99,
     nu_all = _innovations(z, zhat)
     gate = chi2_quantile(gate_prob, 2)
     joint_gate = [0.0] + [float(chi2_quantile(joint_prob, 2 * k)) for k in range(1, n + 1)]
-    # individual compatibility, every (i, j) at once: the 2x2 blocks S_j = C_jj + R inverted
-    # in closed form; each measurement's options nearest first
-    j2 = 2 * np.arange(L)
-    a, b, c = C[j2, j2] + R[0, 0], C[j2, j2 + 1] + R[0, 1], C[j2 + 1, j2 + 1] + R[1, 1]
-    det = a * c - b * b
-    if L and not det.min() > 0.0:
-        raise ValueError("a candidate's innovation covariance is not positive definite")
-    nr, nb = nu_all[..., 0], nu_all[..., 1]
-    d2 = (c * nr * nr - 2.0 * b * nr * nb + a * nb * nb) / det
+    # individual compatibility, every (i, j) at once (S_j = C_jj + R); each measurement's
+    # options nearest first
+    S = C.reshape(L, 2, L, 2)[np.arange(L), :, np.arange(L), :] + R
+    d2 = mahalanobis_fast(z, zhat, S) if L else np.empty((n, 0))
     options = [[j for j in np.argsort(d2[i], kind="stable").tolist() if d2[i, j] <= gate]
                for i in range(n)]
 

@@ -55,8 +55,9 @@ First-estimates Jacobians (``fej=True``; Huang, Mourikis & Roumeliotis 2008, 201
     estimate (kept from :meth:`augment`) and the motion Jacobian of the first prediction
     after an update at the pose predicted before it, F = [[1, 0, -(y' - y)], [0, 1, x' - x],
     [0, 0, 1]] with (x, y) the prior and (x', y') the predicted laser position: the
-    compounded (f0, f1) take the update's position correction (``_cx``, ``_cy``), and so does
-    the heading column of a new landmark's Jacobian (:meth:`augment`). Gating, update and
+    shear by the update's position correction (``_cx``, ``_cy``) is applied once before the
+    next step (:meth:`predict_many`), and the heading column of a new landmark's Jacobian
+    takes the same correction (:meth:`augment`). Gating, update and
     the innovation covariance use the same Jacobians; innovations use the current estimates.
     Why it matters, measured: with FEJ and no GPS, the heading's variance never falls below
     its initial value (nothing observes the global heading); the standard filter's does
@@ -175,7 +176,19 @@ class EkfSlam:
         px, py, phi = self._px, self._py, self._pphi
         p00, p01, p02, p11, p12, p22 = self._p
         F0, F1 = self._f0, self._f1
-        cx, cy = self._cx, self._cy        # nonzero only with fej, after an update
+        if self._cx or self._cy:
+            # fej, after an update (module docstring): the first step's Jacobian at the prior
+            # position is F(step) E with the shear E = [[1, 0, e0], [0, 1, e1], [0, 0, 1]],
+            # (e0, e1) = (-cy, cx): E applied once, here, to these local copies (kept only if
+            # a step is taken, else the correction waits for the next call)
+            e0, e1 = -self._cy, self._cx
+            p00, p01, p02, p11, p12 = (p00 + 2.0 * e0 * p02 + e0 * e0 * p22,
+                                       p01 + e0 * p12 + e1 * p02 + e0 * e1 * p22,
+                                       p02 + e0 * p22,
+                                       p11 + 2.0 * e1 * p12 + e1 * e1 * p22,
+                                       p12 + e1 * p22)
+            F0 += e0
+            F1 += e1
         cos, sin = math.cos, math.sin
         n = 0
         poses = [] if record else None
@@ -190,9 +203,8 @@ class EkfSlam:
                 lx = a * s + b * c
                 ly = a * c - b * s
                 vx = v * c - w * lx
-                f0 = dt * (-v * s - w * ly) - cy
-                f1 = dt * vx + cx
-                cx = cy = 0.0
+                f0 = dt * (-v * s - w * ly)
+                f1 = dt * vx
                 px += dt * vx
                 py += dt * (v * s + w * ly)
                 phi += dt * w
@@ -310,12 +322,8 @@ class EkfSlam:
         bearing = J[1]
         bearing[:] = wrap_difference(np.arctan2(d.imag, d.real) + (_PI / 2 - self._pphi))
         if self.fej:                                       # Jacobians at the first estimates
-            d = self._first.view(complex).ravel() - complex(self._px, self._py)
-            rf = np.abs(d)
-            if not rf.min() >= 1e-9:
-                raise ValueError("a landmark's first estimate coincides with the sensor position "
-                                 "(range < 1e-9 m): its first-estimates Jacobian is undefined")
-            ir = np.divide(1.0, rf, out=J[4])
+            d, J[4] = self._first_estimates()
+            ir = J[4]
         else:
             ir = np.divide(1.0, r, out=J[4])
         u = d * ir                                         # unit vector u_x + i u_y
@@ -388,12 +396,9 @@ class EkfSlam:
             zhat, _, Hl = observe_fast(self.x[:3], self.landmarks()[lm_list])
             J = np.vstack([zhat.T, Hl[:, 0].T, 1.0 / zhat[:, 0]])
             if self.fej:                                   # u and 1/r at the first estimates
-                d = self._first[lm_list] - self.x[:2]
-                rf = np.hypot(d[:, 0], d[:, 1])
-                if not rf.min() >= 1e-9:
-                    raise ValueError("a landmark's first estimate coincides with the sensor "
-                                     "position: its first-estimates Jacobian is undefined")
-                J[2:4], J[4] = (d / rf[:, None]).T, 1.0 / rf
+                d, ir = self._first_estimates(lm_list)
+                u = d * ir
+                J[2], J[3], J[4] = u.real, u.imag, ir
             J = J.tolist()
         # H restricted to the columns cols, filled as a flat list (m is a handful: Python
         # floats beat a dozen small numpy calls): per observation a range row
@@ -411,6 +416,16 @@ class EkfSlam:
             nu += (zr - r[i], (zb - bearing[i] + _PI) % _TWO_PI - _PI)
         return self._correct(cols, np.array(Hc).reshape(2 * m, c), np.array(nu),
                              np.array([sigma_range**2, sigma_bearing**2] * m))
+
+    def _first_estimates(self, idx=slice(None)):
+        """(d, 1 / |d|) with d = l_first - (x, y) as complex numbers, for the landmarks ``idx``
+        (fej: the observation Jacobians' linearisation points)."""
+        d = self._first[idx].view(complex).ravel() - complex(self._px, self._py)
+        r = np.abs(d)
+        if not r.min() >= 1e-9:
+            raise ValueError("a landmark's first estimate coincides with the sensor position "
+                             "(range < 1e-9 m): its first-estimates Jacobian is undefined")
+        return d, 1.0 / r
 
     def joint_prediction(self, lm) -> tuple[np.ndarray, np.ndarray]:
         """Predicted measurements zhat (L, 2) of the distinct landmarks ``lm`` and the joint
@@ -438,8 +453,8 @@ class EkfSlam:
         Hc[2 * k, 0], Hc[2 * k, 1], Hc[2 * k, 3 + 2 * k], Hc[2 * k, 4 + 2 * k] = -ux, -uy, ux, uy
         Hc[2 * k + 1, 0], Hc[2 * k + 1, 1], Hc[2 * k + 1, 2] = -wx, -wy, -1.0
         Hc[2 * k + 1, 3 + 2 * k], Hc[2 * k + 1, 4 + 2 * k] = wx, wy
-        HP = Hc @ self._rows(cols)[:, cols]
-        C = HP @ Hc.T
+        c = np.array(cols)                                 # P[cols, cols] from the upper triangle
+        C = Hc @ self.P[np.minimum.outer(c, c), np.maximum.outer(c, c)] @ Hc.T
         return np.column_stack([r, bearing]), 0.5 * (C + C.T)
 
     def gps_update(self, xy, sigma_gps: float, gate: float = math.inf) -> tuple[float, bool]:
