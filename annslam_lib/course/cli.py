@@ -21,6 +21,7 @@ Each command is a sub-parser added by an ``_add_<command>`` function that sets `
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 
 from ..data import fetch
@@ -149,6 +150,41 @@ def _positive_int(text: str) -> int:
     if n < 1:
         raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}")
     return n
+
+
+def _compare(args: argparse.Namespace) -> int:
+    from ..smoothing.compare import write_comparison
+    from ..smoothing.solve import SolverError
+
+    try:
+        path = write_comparison(args.out, args.datasets, every=args.every)
+    except (SolverError, ValueError) as e:
+        print(f"compare: {e}", file=sys.stderr)
+        return 1
+    rows = json.loads(path.read_text())
+    print("| dataset | estimator | path RMSE (m) | aligned (m) | map aligned (m) | CPU (s) | CPU with its inputs (s) |")
+    print("|---|---|---|---|---|---|---|")
+    for r in rows:
+        m = "-" if r["map_rmse_aligned_m"] is None else f"{r['map_rmse_aligned_m']:.3f}"
+        print(f"| {r['dataset']} | {r['estimator']} | {r['traj_rmse_m']:.2f} | "
+              f"{r['traj_rmse_aligned_m']:.2f} | {m} | {r['cpu_s']:.1f} | {r['cpu_total_s']:.1f} |")
+    print(f"wrote {path} and {path.with_suffix('.png')}")
+    return 0
+
+
+def _add_compare(sub) -> None:
+    p = sub.add_parser("compare", help="EKF-SLAM against iSAM2 and batch smoothing (GTSAM) on "
+                       "the Car Park and Victoria Park",
+                       description="Writes DIR/comparison.json (one row per dataset and "
+                       "estimator: path RMSE against the valid GPS fixes, absolute and aligned, "
+                       "map RMSE against the surveyed beacons, CPU seconds) and "
+                       "DIR/comparison.png (chapter 10).")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
+    p.add_argument("--datasets", nargs="+", default=["car_park", "victoria_park"],
+                   choices=["car_park", "victoria_park"], help="default: both")
+    p.add_argument("--every", type=_positive_int, default=1, metavar="N",
+                   help="iSAM2 updates every N poses (default 1: every scan)")
+    p.set_defaults(func=_compare)
 
 
 def _add_reproduce(sub) -> None:
@@ -460,6 +496,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_errata(sub)
     _add_cache(sub)
     _add_reproduce(sub)
+    _add_compare(sub)
     _add_release(sub)
     _add_grade(sub)
     _add_exercises(sub)

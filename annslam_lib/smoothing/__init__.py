@@ -1,0 +1,10 @@
+"""Smoothing layer: the same runs as factor graphs, solved with GTSAM (chapter 10).
+
+- ``problem``: a run's graph as plain arrays (poses per event, odometry, range-bearing and
+  GPS factors, the prior), built from an EKF run with the course's models, and its checks
+- ``solve``: the graph in GTSAM, solved incrementally (iSAM2) and in batch (LM)
+- ``compare``: EKF against iSAM2 and batch on the Car Park and Victoria Park
+  (``python -m annslam_lib compare``)
+"""
+
+__all__ = ["problem", "solve", "compare"]
