@@ -85,6 +85,9 @@ SETUP = {
                            "st = study.study(car, seeds=5)\n"
                            "sweep = study.r_scale_sweep(car, t_heldout=st.t_heldout)\n"
                            "ref = study.reference_from_study(st, 0)\n",
+    "10_beyond_the_ekf": "from annslam_lib.chapters import ch10_beyond_ekf as chapter\n"
+                         "chapter.setup(precision=4)\n" + _CAR +
+                         "p = chapter.car_park_graph(car)['problem']\n",
 }
 
 # (notebook, the widget call exactly as its cell has it)
@@ -101,6 +104,7 @@ WIDGETS = [
     ("06_victoria_park", "chapter.run_scrubber(r, vp.gps, start=1100, outliers=out)"),
     ("07_ann_training", "chapter.hidden_size_explorer(grid, hidden=10, seed=0)"),
     ("08_ann_slam_verdict", "chapter.r_scale_explorer(sweep=sweep, reference=ref, scale=1.0)"),
+    ("10_beyond_the_ekf", "chapter.loop_closure_explorer(car, p, keep=1.0)"),
 ]
 
 # The widget's state in cell `i`: slider readouts, its text (printed lines or the HTML

@@ -1,9 +1,9 @@
-"""The widgets of chapters 05-08 driven in JupyterLab + headless Chromium: see
+"""The widgets of chapters 05-10 driven in JupyterLab + headless Chromium: see
 tests/browser_widgets.py for what is checked."""
 import pytest
 from browser_widgets import browser, check_widgets, chromium, lab, notebooks  # noqa: F401
 
-NOTEBOOKS = notebooks(5, 8)
+NOTEBOOKS = notebooks(5, 10)
 
 
 @pytest.mark.parametrize("stem", NOTEBOOKS)

@@ -16,11 +16,13 @@ from annslam_lib.grading import kinematics as gkin
 from annslam_lib.grading import localisation as gloc
 from annslam_lib.grading import metrics as gm
 from annslam_lib.grading import observation as gobs
+from annslam_lib.grading import smoothing as gsm
 from annslam_lib.grading import verdict as gv
 from annslam_lib.models import motion, observation
 from annslam_lib.models.vehicle import Vehicle
 from annslam_lib.perception import association
 from annslam_lib.slam import dense, kalman, localisation
+from annslam_lib.smoothing import factors
 
 from solutions import solution
 
@@ -74,6 +76,13 @@ CASES = [
      "ann.network.train_loop"),
     (gv.check_rigid_align, "08", "my_rigid_align",
      lambda a, b: map_eval.rigid_align(a, b), "evaluation.map.rigid_align"),
+    (gsm.check_between_error, "10", "my_between_error",
+     lambda xi, xj, d: factors.between_error(xi, xj, d),
+     r"smoothing.factors.between_error and annslam_lib\.smoothing\.factors\.se2_log"),
+    (gsm.check_bearing_range_error, "10", "my_bearing_range_error",
+     lambda p, m, z: factors.bearing_range_error(p, m, z), "smoothing.factors.bearing_range_error"),
+    (gsm.check_tangent_to_world, "10", "my_tangent_to_world",
+     lambda S, phi: factors.tangent_to_world(S, phi), "smoothing.factors.tangent_to_world"),
 ]
 
 

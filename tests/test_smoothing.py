@@ -327,3 +327,38 @@ def test_the_smoothed_track_agrees_with_evo(tmp_path):
     ape.process_data((ref, est))
     assert ape.get_statistic(metrics.StatisticsType.rmse) == pytest.approx(ours.rmse, rel=1e-9)
     del evo_core
+
+
+# -- the factors written out (chapter 10's derivations) against GTSAM ------------------------
+
+def test_the_written_out_factor_errors_equal_gtsams():
+    from annslam_lib.smoothing import factors as fa
+    rng = np.random.default_rng(5)
+    br_noise = gtsam.noiseModel.Diagonal.Sigmas(np.array([0.02, 0.1]))
+    noise = gtsam.noiseModel.Diagonal.Sigmas(np.array([0.1, 0.1, 0.01]))
+    thetas = [0.0, 1e-12, -1e-7, 3.0, -3.1, math.pi, 1.0]
+    for k in range(40):
+        xi, xj = _pose(rng), _pose(rng)
+        if k < len(thetas):                       # the logarithm near 0 and near pi
+            xj = pr.compose(xi, np.array([rng.normal(0, 3), rng.normal(0, 3), thetas[k]]))
+        delta = pr.relative_pose(xi, xj) + rng.normal(0, [0.3, 0.3, 0.2])
+        delta[2] = wrap_angle(delta[2])
+        g = gtsam.Pose2(*xj)
+        np.testing.assert_allclose(fa.se2_log(np.array([g.x(), g.y(), g.theta()])),
+                                   gtsam.Pose2.Logmap(g), atol=1e-9)
+        v = gtsam.Values()
+        v.insert(X(0), gtsam.Pose2(*xi))
+        v.insert(X(1), gtsam.Pose2(*xj))
+        f = gtsam.BetweenFactorPose2(X(0), X(1), gtsam.Pose2(*delta), noise)
+        np.testing.assert_allclose(fa.between_error(xi, xj, delta), f.unwhitenedError(v), atol=1e-9)
+        lm = xi[:2] + rng.uniform(2, 30) * np.array([math.cos(a := rng.uniform(-3, 3)), math.sin(a)])
+        z = np.array([rng.uniform(2, 30), rng.uniform(-math.pi, math.pi)])
+        v.insert(L(0), gtsam.Point2(*lm))
+        b = gtsam.BearingRangeFactor2D(X(0), L(0), gtsam.Rot2(z[1] - math.pi / 2), z[0], br_noise)
+        np.testing.assert_allclose(fa.bearing_range_error(xi, lm, z), b.unwhitenedError(v), atol=1e-9)
+        A = rng.normal(size=(3, 3))
+        S = A @ A.T
+        np.testing.assert_allclose(pr.world_to_tangent(fa.tangent_to_world(S, xi[2]), xi[2]), S,
+                                   atol=1e-12)
+    with pytest.raises(ValueError, match="shape"):
+        fa.between_error(np.zeros((2, 3)), np.zeros(3), np.zeros(3))

@@ -11,4 +11,4 @@ callback; the widget keeps its latest result in ``widget.holder["summary"]`` so 
 test can move a slider and check what a student would see.
 """
 
-__all__ = ["ch00_course_map", "ch01_kinematics", "ch01a_kalman_filter", "ch02_laser_offset", "ch03_observation", "ch04_landmarks", "ch04a_localisation", "ch05_ekf_slam", "ch06_victoria_park", "ch07_ann_training", "ch08_verdict", "ch09_capstone"]
+__all__ = ["ch00_course_map", "ch01_kinematics", "ch01a_kalman_filter", "ch02_laser_offset", "ch03_observation", "ch04_landmarks", "ch04a_localisation", "ch05_ekf_slam", "ch06_victoria_park", "ch07_ann_training", "ch08_verdict", "ch09_capstone", "ch10_beyond_ekf"]

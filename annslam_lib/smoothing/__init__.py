@@ -2,9 +2,11 @@
 
 - ``problem``: a run's graph as plain arrays (poses per event, odometry, range-bearing and
   GPS factors, the prior), built from an EKF run with the course's models, and its checks
+- ``factors``: a between and a range-bearing factor's error, SE(2)'s logarithm, a marginal
+  covariance read in the filter's coordinates (numpy, checked against GTSAM)
 - ``solve``: the graph in GTSAM, solved incrementally (iSAM2) and in batch (LM)
 - ``compare``: EKF against iSAM2 and batch on the Car Park and Victoria Park
   (``python -m annslam_lib compare``)
 """
 
-__all__ = ["problem", "solve", "compare"]
+__all__ = ["problem", "factors", "solve", "compare"]

@@ -28,6 +28,7 @@ import numpy as np
 
 from .. import _checks
 from ..models.observation import inverse_observe
+from .factors import tangent_to_world
 from .problem import GraphProblem, check_problem, compose
 
 __all__ = ["SolverError", "SmoothingResult", "gps_error", "build_graph", "solve_batch", "marginals",
@@ -308,9 +309,7 @@ def marginals(problem: GraphProblem, result: SmoothingResult) -> tuple[np.ndarra
     K, L = problem.n_poses, problem.n_landmarks
     P = np.empty((K, 3, 3))
     for k in range(K):
-        c, s = math.cos(result.poses[k, 2]), math.sin(result.poses[k, 2])
-        B = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        P[k] = B @ m.marginalCovariance(pose_key(k)) @ B.T
+        P[k] = tangent_to_world(m.marginalCovariance(pose_key(k)), float(result.poses[k, 2]))
     Lc = np.empty((L, 2, 2))
     for j in range(L):
         Lc[j] = m.marginalCovariance(landmark_key(j))
