@@ -104,7 +104,7 @@ WIDGETS = [
     ("06_victoria_park", "chapter.run_scrubber(r, vp.gps, start=1100, outliers=out)"),
     ("07_ann_training", "chapter.hidden_size_explorer(grid, hidden=10, seed=0)"),
     ("08_ann_slam_verdict", "chapter.r_scale_explorer(sweep=sweep, reference=ref, scale=1.0)"),
-    ("10_beyond_the_ekf", "chapter.loop_closure_explorer(car, p, keep=1.0)"),
+    ("10_beyond_the_ekf", "chapter.loop_closure_explorer(car, p, drop=0.0)"),
 ]
 
 # The widget's state in cell `i`: slider readouts, its text (printed lines or the HTML

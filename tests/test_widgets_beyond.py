@@ -61,8 +61,8 @@ def test_loop_closures_are_the_returns_after_a_gap_and_dropped_ones_make_copies(
 
 def test_the_explorer_shows_the_batch_solution_of_the_split_graph(car_park, graph):
     p = graph["problem"]
-    w = ch.loop_closure_explorer(car_park, p, keep=1.0)
-    w.children[0].value = 0.0
+    w = ch.loop_closure_explorer(car_park, p, drop=0.0)
+    w.children[0].value = 1.0
     w.update()
     s = w.holder["summary"]
     b = gs.solve_batch(ch.split_loop_closures(p, 0.0))
@@ -74,7 +74,7 @@ def test_the_explorer_shows_the_batch_solution_of_the_split_graph(car_park, grap
 
 
 def test_kept_layout_stays_clear_at_the_controls_ends(car_park, graph):
-    assert_kept_layouts_clear(lambda: ch.loop_closure_explorer(car_park, graph["problem"], keep=1.0))
+    assert_kept_layouts_clear(lambda: ch.loop_closure_explorer(car_park, graph["problem"], drop=0.0))
 
 
 def test_the_shared_error_scene_fools_nearest_neighbour_not_jcbb():

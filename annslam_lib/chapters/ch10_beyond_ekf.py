@@ -31,10 +31,12 @@ from ..smoothing.compare import compare_dataset, valid_fixes
 
 __all__ = ["setup", "heading_information", "heading_figure", "FEJ_SEEDS", "FEJ_PRIOR",
            "fej_study", "shared_error_scene", "JCBB_SEEDS", "jcbb_study", "car_park_graph",
-           "victoria_park_comparison", "cost_figure", "split_loop_closures",
+           "smoother_consistency", "victoria_park_comparison", "cost_figure", "split_loop_closures",
            "loop_closure_summary", "loop_closure_explorer", "EXPLORER_FIGSIZE"]
 
 EXPLORER_FIGSIZE = (8.0, 3.8)
+#: The loop-closure explorer's slider step (share of closures dropped).
+DROP_STEP = 0.25
 #: The Monte Carlo runs of section 1 (simulator seeds) and the start's prior (m, rad).
 FEJ_SEEDS = tuple(range(400, 412))
 FEJ_PRIOR = (0.1, math.radians(2.0))
@@ -172,6 +174,34 @@ def car_park_graph(car: Dataset) -> dict:
 
 
 @memoize
+def smoother_consistency(seeds=FEJ_SEEDS) -> dict:
+    """The EKF (filtered) against batch smoothing of its graph (``smoothing``) on simulated
+    runs (chapter 05's configuration): per run, the pose NEES / 3 averaged over the scans
+    (the smoother's covariance: GTSAM's marginals, ``solve.marginals``) and the position
+    RMSE against the true laser poses at the scans."""
+    from ..data import simulate
+    from ..models.geometry import wrap_angle
+    out = {k: [] for k in ("ekf_nees", "batch_nees", "ekf_rmse", "batch_rmse")}
+    for seed in seeds:
+        ds = simulate.simulate(seed=int(seed), laps=2, raw_laser=False)
+        r = run(ds, SlamConfig.for_dataset("simulated", motion_model="midpoint"), progress=False)
+        p = gp.build_problem(ds, r)
+        b = gs.solve_batch(p)
+        cov, _ = gs.marginals(p, b)
+        truth = np.asarray(ds.info["scan_poses"])
+        k = np.flatnonzero(p.scan >= 0)
+        e = b.poses[k] - truth[p.scan[k]]
+        e[:, 2] = wrap_angle(e[:, 2])
+        nees = np.einsum("ki,ki->k", e, np.linalg.solve(cov[k], e[..., None])[..., 0])
+        out["ekf_nees"].append(float(consistency.pose_nees(r, ds).mean()) / 3)
+        out["batch_nees"].append(float(nees.mean()) / 3)
+        d = r.trajectory[:, 1:3] - truth[r.scan_index, :2]
+        out["ekf_rmse"].append(math.sqrt(float(np.mean(np.sum(d * d, axis=1)))))
+        out["batch_rmse"].append(math.sqrt(float(np.mean(np.sum(e[:, :2] ** 2, axis=1)))))
+    return {k: np.array(v) for k, v in out.items()}
+
+
+@memoize
 def victoria_park_comparison(every: int = 10) -> dict:
     """``smoothing.compare.compare_dataset('victoria_park', every=every)``: the rows and
     iSAM2's cost per update, computed once per machine."""
@@ -247,36 +277,39 @@ def loop_closure_summary(car: Dataset, problem: gp.GraphProblem, keep: float) ->
             "error_final": b.error_final}
 
 
-def loop_closure_explorer(car: Dataset, problem: gp.GraphProblem, *, keep: float = 1.0):
-    """A slider for the share of loop closures the graph keeps (the rest become second
-    copies of their landmarks); shows the smoothed track's error against GPS along the run.
-    ``widget.holder['summary']`` keeps the latest :func:`loop_closure_summary`."""
+def loop_closure_explorer(car: Dataset, problem: gp.GraphProblem, *, drop: float = 0.0):
+    """A slider for the share of loop closures the graph drops (the latest first; each
+    dropped one starts a second copy of its landmark); shows the smoothed track's error
+    against GPS along the run. ``widget.holder['summary']`` keeps the latest
+    :func:`loop_closure_summary`."""
     holder = {}
-    ref = loop_closure_summary(car, problem, 1.0)["errors"]
-    cache = {}
+    # every slider position solved once here (a batch solve each), so a step only draws
+    steps = np.round(np.arange(0.0, 1.0 + 1e-9, DROP_STEP), 2)
+    cache = {float(k): loop_closure_summary(car, problem, float(k)) for k in np.round(1.0 - steps, 2)}
+    ref = cache[1.0]["errors"]
 
-    def draw(keep: float) -> None:
-        k = round(float(keep), 2)
-        if k not in cache:
-            cache[k] = loop_closure_summary(car, problem, k)
-        s = cache[k]
+    def draw(drop: float) -> None:
+        keep = float(round(1.0 - float(drop), 2))
+        if keep not in cache:
+            cache[keep] = loop_closure_summary(car, problem, keep)
+        s = cache[keep]
         fig, ax = widget_figure(figsize=EXPLORER_FIGSIZE)
         ax.plot(ref.t, ref.error, color="0.6", lw=1, label="every loop closure")
         ax.plot(s["errors"].t, s["errors"].error, color="tab:red", lw=1,
-                label=f"{s['closures'] - s['dropped']} of {s['closures']} closures kept")
+                label=f"{s['dropped']} of {s['closures']} closures dropped")
         ax.set(xlabel="time [s]", ylabel="error against GPS [m]",
                title="batch smoothing of the Car Park without GPS after 10 s")
         ax.legend(fontsize=8, loc="upper left")
         ax.grid(True, alpha=0.3)
         holder["summary"] = s
-        print(f"{s['closures'] - s['dropped']} of {s['closures']} loop closures kept, "
+        print(f"{s['dropped']} of {s['closures']} loop closures dropped, "
               f"{s['landmarks']} landmarks ({s['duplicates']} second copies near a beacon): "
               f"path RMSE {s['traj_rmse']:.3f} m ({s['traj_rmse_aligned']:.3f} m aligned), "
               f"map {s['map_rmse_aligned']:.3f} m aligned")
         show_widget_figure(fig)
 
-    widget = interactive(draw, keep=FloatSlider(value=keep, min=0.0, max=1.0, step=0.25,
-                                                description="closures kept",
+    widget = interactive(draw, drop=FloatSlider(value=drop, min=0.0, max=1.0, step=DROP_STEP,
+                                                description="closures dropped",
                                                 continuous_update=False, readout_format=".2f"))
     widget.holder = holder
     return widget

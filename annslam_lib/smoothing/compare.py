@@ -103,7 +103,8 @@ def plot_comparison(rows, extras):
     beacons), and iSAM2's CPU per update as the map grows beside the EKF's per scan."""
     import matplotlib.pyplot as plt
     names = list(extras)
-    fig, axes = plt.subplots(len(names), 2, figsize=(11, 4.6 * len(names)), squeeze=False)
+    fig, axes = plt.subplots(len(names), 2, figsize=(11, 4.6 * len(names)), squeeze=False,
+                             layout="constrained")
     colour = {"ekf": "tab:red", "isam2": "tab:green", "batch": "k"}
     for (ax, ax2), name in zip(axes, names):
         x = extras[name]
@@ -135,7 +136,6 @@ def plot_comparison(rows, extras):
         ax2.set_ylabel("CPU per step (ms)")
         ax2.set_title(f"{name}: cost per step as the map grows")
         ax2.legend(fontsize=7)
-    fig.tight_layout()
     return fig
 
 
