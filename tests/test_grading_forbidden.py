@@ -125,3 +125,13 @@ def test_the_rule_is_found_through_aliases_and_getattr():
         from annslam_lib.grading import ann as gann
         gann.check_forward(lambda *a: forward(*a))
     assert np.isfinite(1.0)
+
+
+def test_the_inverse_map_through_the_library_is_refused_too():
+    """B S B^T is also world_to_tangent(S, -phi): that shortcut is forbidden as well."""
+    from annslam_lib.smoothing.problem import world_to_tangent
+
+    def my_tangent_to_world(S, phi):
+        return world_to_tangent(S, -phi)
+    with pytest.raises(GradingError, match="world_to_tangent: write it yourself"):
+        gsm.check_tangent_to_world(my_tangent_to_world, quiet=True)

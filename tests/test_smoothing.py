@@ -245,6 +245,22 @@ def test_a_graph_without_prior_is_refused_though_gtsam_would_answer(sim_runs):
     assert g.error(out) < 1e-12                  # "converged", at an arbitrary gauge
 
 
+def test_a_graph_held_by_gps_alone_is_solved_in_batch_and_refused_by_isam2(sim_runs):
+    import dataclasses
+    ds, r, P = sim_runs[4]
+    T = _truth_at_nodes(ds, P)
+    nodes = np.arange(0, P.n_poses, 20)
+    gps = dataclasses.replace(P, prior_pose=None, prior_cov=None, gps_node=nodes,
+                              gps_xy=T[nodes, :2], sigma_gps=0.05)
+    b = sv.solve_batch(gps)                   # two distinct positions fix the heading too
+    assert np.sqrt(np.mean(np.sum((b.poses[:, :2] - T[:, :2]) ** 2, axis=1))) < 0.2
+    with pytest.raises(ValueError, match="solve_isam2 needs a prior on the first pose"):
+        sv.solve_isam2(gps)
+    same = dataclasses.replace(gps, gps_xy=np.repeat(T[:1, :2], nodes.size, axis=0))
+    with pytest.raises(ValueError, match="missing prior"):   # one spot: the heading is free
+        sv.solve_batch(same)
+
+
 def test_bad_graphs_name_their_cause(sim_runs):
     import dataclasses
     ds, r, P = sim_runs[2]

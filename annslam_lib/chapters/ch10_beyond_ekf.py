@@ -214,7 +214,7 @@ def cost_figure(vp: dict):
     fig, ax = figure(height=3.4)
     step = np.asarray(vp["step_cpu"]) * 1e3
     ax.plot(vp["step_landmarks"], step, ".", ms=2, color="tab:green", alpha=0.5,
-            label=f"iSAM2, one update (every {vp['every']} scans)")
+            label=f"iSAM2, one update (every {vp['every']} poses: scans, GPS fixes)")
     ax.axhline(vp["ekf_cpu_per_scan"] * 1e3 * vp["every"], color="tab:red",
                label=f"EKF, {vp['every']} scans (mean over the run)")
     ax.set(xlabel="landmarks in the map", ylabel="CPU per update [ms]", yscale="log",
@@ -229,7 +229,8 @@ def split_loop_closures(problem: gp.GraphProblem, keep: float, gap: float = 5.0)
     sighting of a landmark after ``gap`` seconds without one is a closure; a closure that is
     dropped, and every later sighting of that pass, go to a NEW landmark (what a filter that
     does not recognise the place builds: a second copy, not connected to the first).
-    Counts of closures kept and dropped in ``counts``."""
+    ``counts['closures']`` (all) and ``counts['closures_dropped']``: exactly
+    ``closures - floor(keep * closures)``."""
     keep = _checks.real("keep", keep, lo=0.0, hi=1.0)
     t = problem.t[problem.obs_node]
     order = np.lexsort((t, problem.obs_landmark))       # by landmark, then time
@@ -239,11 +240,13 @@ def split_loop_closures(problem: gp.GraphProblem, keep: float, gap: float = 5.0)
     start = first.copy()                                # a pass: sightings < gap apart
     start[1:] |= tt[1:] - tt[:-1] > gap
     closure = start & ~first
-    t_closure = np.sort(tt[closure])
-    n_keep = int(math.floor(keep * t_closure.size + 1e-9))
-    cut = t_closure[n_keep] if n_keep < t_closure.size else math.inf
+    idx = np.flatnonzero(closure)
+    idx = idx[np.argsort(tt[idx], kind="stable")]       # the closures in time order
+    n_keep = int(math.floor(keep * idx.size + 1e-9))
+    dropped = np.zeros(lm.size, dtype=bool)
+    dropped[idx[n_keep:]] = True                        # the latest ones, ties by order
     pass_of = np.cumsum(start) - 1                      # each sighting's pass
-    dropped_pass = (closure & (tt >= cut))[start]       # per pass
+    dropped_pass = dropped[start]                       # per pass
     new_id = np.full(dropped_pass.size, -1, dtype=np.int64)
     L, n_new = problem.n_landmarks, int(dropped_pass.sum())
     new_id[dropped_pass] = L + np.arange(n_new)

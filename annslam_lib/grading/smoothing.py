@@ -38,9 +38,9 @@ def _pose(rng, spread=30.0):
 # ------------------------------------------------------------------------- 10.1 between
 
 def _between_cases(seed: int, n: int) -> list[tuple]:
-    """Exact odometry (error zero), small and large rotations between the poses (the
-    logarithm near 0 and near pi), headings on both sides of +-pi, then ``n`` seeded random
-    poses with noisy relative poses."""
+    """Exact odometry (error zero), small and large rotations between the poses, headings on
+    both sides of +-pi, errors whose own rotation (the logarithm's argument) is near pi and
+    near 0, then ``n`` seeded random poses with noisy relative poses."""
     rng = np.random.default_rng(seed)
     cases = []
     for th in (0.0, 1e-5, 0.3, -2.0, 3.1, -3.13):
@@ -53,6 +53,10 @@ def _between_cases(seed: int, n: int) -> list[tuple]:
         cases.append((xi, xj, noisy))
     cases.append((np.array([1.0, 2.0, math.pi - 0.01]), np.array([3.0, 2.5, -math.pi + 0.02]),
                   np.array([-2.0, 0.4, 0.05])))
+    for th in (3.1, -3.13, 1e-5):             # the logarithm's own rotation near pi and near 0
+        xi, xj = _pose(rng), _pose(rng)
+        d = compose(relative_pose(xi, xj), np.array([rng.uniform(-4, 4), rng.uniform(-4, 4), -th]))
+        cases.append((xi, xj, d))
     for _ in range(n):
         xi, xj = _pose(rng), _pose(rng)
         d = relative_pose(xi, xj) + rng.normal(0, [0.5, 0.5, 0.3])
@@ -104,8 +108,8 @@ def check_between_error(fn, *, seed: int = 0, n: int = 30, name: str = "my_betwe
                    labels=("v_x", "v_y", "ω"), angles=[2], mistakes=_between_mistakes(name),
                    what="smoothing.factors.between_error", quiet=True, rtol=1e-6, atol=1e-8)
     return _done(f"✓ {name} agrees with smoothing.factors.between_error (GTSAM's "
-                 f"BetweenFactorPose2) on {len(cases)} pose pairs (rotations near 0 and near "
-                 "π, headings across ±π).", quiet)
+                 f"BetweenFactorPose2) on {len(cases)} pose pairs (errors rotated near 0 and "
+                 "near π, headings across ±π).", quiet)
 
 
 # ------------------------------------------------------------------- 10.2 bearing-range
@@ -222,7 +226,7 @@ def _t_mistakes(name: str) -> list[Mistake]:
     ]
 
 
-@forbids(factors.tangent_to_world)
+@forbids(factors.tangent_to_world, world_to_tangent)
 def check_tangent_to_world(fn, *, seed: int = 0, n: int = 30, name: str = "my_tangent_to_world",
                            quiet: bool = False) -> str:
     """Grade ``fn(S, phi) -> (3, 3)``, chapter 10 eq. (10.7): GTSAM's marginal covariance of

@@ -30,7 +30,8 @@ def _one(name: str, value, shape: tuple) -> np.ndarray:
 
 def se2_log(pose) -> np.ndarray:
     """Logarithm of SE(2) (GTSAM's ``Pose2.Logmap``), eq. (10.4): for X = (t, theta) with
-    theta in (-pi, pi], xi = (V(theta)^-1 t, theta), V(theta) = [[s, -c'], [c', s]] with
+    theta wrapped to (-pi, pi] (at theta = -pi exactly GTSAM keeps -pi: the other sign of the
+    same rotation), xi = (V(theta)^-1 t, theta), V(theta) = [[s, -c'], [c', s]] with
     s = sin(theta)/theta and c' = (1 - cos(theta))/theta (V = I at theta = 0)."""
     pose = _one("pose", pose, (3,))
     th = float(wrap_angle(pose[2]))

@@ -18,11 +18,11 @@ Built from an EKF run (:func:`build_problem`) with the course's own models:
 - per GPS fix the EKF used, a position factor (``sigma_gps``); a prior on the start pose
   (the EKF's initial pose and covariance).
 
-Every pose is linked to the next, so the graph is connected; a landmark seen fewer than
-``min_sightings`` times is left out (counted in ``counts['landmarks_dropped']``):
-its position would only echo its one measurement. :func:`check_problem` refuses a problem
-that cannot have one solution (no prior and fewer than two GPS fixes, a landmark no factor
-reaches, a pose cut from its neighbours), naming the cause.
+Every pose is linked to the next by construction (K poses, K - 1 odometry factors), so the
+graph is connected; a landmark seen fewer than ``min_sightings`` times is left out (counted
+in ``counts['landmarks_dropped']``): its position would only echo its one measurement.
+:func:`check_problem` refuses a problem that cannot have one solution (no prior and fewer
+than two distinct GPS positions, a landmark no factor reaches), naming the cause.
 """
 from __future__ import annotations
 
@@ -57,7 +57,8 @@ class GraphProblem:
     (range, bearing in the laser convention: 0 to the right, pi/2 ahead); sigma_range,
     sigma_bearing; gps_node (G,), gps_xy (G, 2), sigma_gps; prior_pose (3,), prior_cov
     (3, 3) (tangent space at prior_pose) or None; initial_poses (K, 3), initial_landmarks
-    (L, 2): the EKF's estimate (poses after each event, its final map); dead_reckoning
+    (L, 2): the EKF's estimate (its pose after each scan's update; at a GPS node the node
+    before moved on by the odometry; its final map); dead_reckoning
     (K, 3): the odometry chain from the prior; dense_t, dense_node, dense_rel: every
     odometry sample's pose relative to the node before it (a smoothed dense track:
     :meth:`dense_track`); landmark_ekf (L,): the EKF's index of each landmark;
@@ -299,10 +300,12 @@ def build_problem(dataset: Dataset, result: SlamResult, *, min_sightings: int = 
 
 def check_problem(problem: GraphProblem) -> None:
     """Refuse a graph without one solution, naming the cause (ValueError): non-finite or
-    mis-shaped data, non-positive-definite noise, no prior and fewer than two GPS fixes
-    (the whole solution could slide and turn: the gauge is free), a pose cut from the next
-    one, a landmark no factor reaches (or reached by a single bearing-range factor while
-    ``min_sightings`` asked more is not an error: one range-bearing sighting fixes a point).
+    mis-shaped data, non-positive-definite noise, no prior and fewer than two distinct GPS
+    positions (the whole solution could slide and turn: the gauge is free), a landmark no
+    factor reaches. (A landmark with one range-bearing factor is not an error: one sighting
+    fixes a point; ``build_problem``'s ``min_sightings`` leaves such landmarks out.) GTSAM's
+    LM would return an answer for such graphs all the same (its damping holds the free
+    directions), so this check runs before every solve.
     """
     _checks.instance("problem", problem, GraphProblem, "smoothing.GraphProblem")
     K, L = problem.n_poses, problem.n_landmarks
@@ -342,9 +345,12 @@ def check_problem(problem: GraphProblem) -> None:
             raise ValueError(f"{what}: covariance not symmetric positive definite (a standing "
                              "car or an exact start: floor it, build_problem's odometry_floor)")
     if problem.prior_pose is None:
-        if np.unique(problem.gps_node).size < 2:
+        xy = problem.gps_xy
+        spread = float(np.max(np.ptp(xy, axis=0))) if xy.shape[0] else 0.0
+        if np.unique(problem.gps_node).size < 2 or not spread > 0.0:
             raise ValueError("missing prior: no prior on a pose and fewer than two poses with "
-                             "a GPS fix, so the whole solution may slide and turn freely "
+                             "GPS fixes at distinct positions, so the whole solution may slide "
+                             "and turn freely "
                              "(the gauge is free); give prior_pose and prior_cov")
     elif problem.prior_pose.shape != (3,) or problem.prior_cov is None or \
             problem.prior_cov.shape != (3, 3) or not np.all(np.isfinite(problem.prior_pose)):

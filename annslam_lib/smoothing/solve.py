@@ -13,10 +13,12 @@ What GTSAM taught us on these runs (measured): iSAM2 with Cholesky factorisation
 with an indeterminate system on Victoria Park, QR does not (the default here); batch LM
 from dead reckoning can settle 65 m off on Victoria Park, so start it from the incremental
 (or the EKF's) solution; iSAM2's partial relinearisation stops short of the optimum, which
-a batch pass reaches. A solver that fails raises :class:`SolverError` naming the cause
-(GTSAM's message names the variable, ``x12`` for pose 12, ``l3`` for landmark 3), never
-returns a silent wrong answer: LM that stops at its iteration limit without converging
-raises too.
+a batch pass reaches. GTSAM's LM does NOT refuse an under-determined graph: its damping
+holds the free directions wherever the start put them and it returns an answer. The guard
+is :func:`~annslam_lib.smoothing.problem.check_problem`, run before every solve; what GTSAM
+itself finds indeterminate (iSAM2, marginals) is raised as :class:`SolverError` with GTSAM's
+message (it names the variable, ``x12`` for pose 12, ``l3`` for landmark 3), and LM that
+stops at its iteration limit while the error still falls raises too.
 """
 from __future__ import annotations
 
@@ -152,7 +154,9 @@ class SmoothingResult:
     """A solved graph. estimator: 'isam2' or 'batch'; poses (K, 3), landmarks (L, 2);
     t (K,): the poses' times; cpu_s: process CPU seconds of the solve (building the
     factors included); error_initial, error_final: the graph's error (sum of squared
-    whitened residuals / 2) at the start and at the solution; iterations (batch) or updates
+    whitened residuals / 2) at the values LM started from (batch) or at the problem's
+    initial values, the EKF's estimate (iSAM2, whose own start is built pose by pose), and
+    at the solution; iterations (batch) or updates
     (iSAM2); step_cpu: iSAM2's CPU seconds per update (empty for batch), step_landmarks:
     the landmarks in the graph at each update."""
 
@@ -236,9 +240,16 @@ def solve_isam2(problem: GraphProblem, *, relinearize_threshold: float = 0.1,
     their factors; a new pose starts at the previous pose's current estimate moved by the
     odometry, a new landmark at its first detection seen from there
     (``observation.inverse_observe``). factorization 'QR' (default) or 'CHOLESKY'.
-    Raises :class:`SolverError` if an update finds the system indeterminate."""
+    Needs a prior on the first pose (ValueError): iSAM2 solves from its first update on, and
+    a first pose held by a GPS position alone has a free heading there (``solve_batch``
+    takes a graph fixed by GPS fixes alone). Raises :class:`SolverError` if an update finds
+    the system indeterminate."""
     g = _gtsam()
     check_problem(problem)
+    if problem.prior_pose is None:
+        raise ValueError("solve_isam2 needs a prior on the first pose (problem.prior_pose): its "
+                         "first update would hold pose 0 by a GPS position alone, its heading "
+                         "free; solve such a graph with solve_batch")
     every = _checks.integer("every", every, lo=1)
     _checks.choice("factorization", factorization, ("QR", "CHOLESKY"))
     c0 = time.process_time()
