@@ -98,7 +98,8 @@ def pytest_configure(config):
 SPLIT = ("tests/test_student_run.py",)
 HEAVY_FIRST = ("tests/test_hub.py", "tests/test_install.py", "tests/test_grader_nbgrader.py",
                "tests/test_grader_attacks.py",
-               "notebooks/08", "notebooks/05", "notebooks/07", "notebooks/06", "notebooks/",
+               "notebooks/08", "notebooks/10", "notebooks/05", "notebooks/07", "notebooks/06",
+               "notebooks/",
                # after the instructor versions: the student versions' Run Alls and the
                # widget notebooks read the studies those computed (one cache per session)
                "tests/test_student_run.py", "tests/test_browser_widgets_0508.py",
