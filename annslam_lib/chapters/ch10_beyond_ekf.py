@@ -202,7 +202,7 @@ def smoother_consistency(seeds=FEJ_SEEDS) -> dict:
 
 
 @memoize
-def victoria_park_comparison(every: int = 10) -> dict:
+def victoria_park_comparison(every: int = 25) -> dict:
     """``smoothing.compare.compare_dataset('victoria_park', every=every)``: the rows and
     iSAM2's cost per update, computed once per machine."""
     rows, extra = compare_dataset("victoria_park", every=every)
