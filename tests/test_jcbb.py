@@ -78,6 +78,31 @@ def test_jcbb_finds_the_hypothesis_brute_force_finds(seed):
     assert len(ties) >= 1
 
 
+@pytest.mark.parametrize("seed", range(100, 108))
+def test_the_incremental_search_agrees_with_brute_force_on_deeper_scenes(seed):
+    """Five measurements and five landmarks, an uncertain pose: branches five pairings deep,
+    where the search's extended Cholesky factor is used four times over."""
+    rng = np.random.default_rng(seed)
+    z, zhat, C, _ = scene(rng, n_lm=5, n_z=5, pose_sigma=(0.6, 0.6, 0.1))
+    ref, pairings, nis, _ = brute_force(z, zhat, C, R)
+    got = jcbb.jcbb(z, zhat, C, R)
+    assert got.complete and got.pairings == pairings
+    np.testing.assert_array_equal(got.pairs, ref)
+    assert got.nis == pytest.approx(nis, rel=1e-9, abs=1e-12)
+    assert got.nis == pytest.approx(jcbb.joint_nis(z, zhat, C, R, got.pairs), rel=1e-12, abs=1e-12)
+
+
+def test_a_joint_covariance_that_is_not_positive_definite_is_refused():
+    """Each prediction alone is fine, the pair is not (perfectly correlated with opposite
+    signs, and R = 0 is not allowed, so the pair's 4x4 block is made indefinite)."""
+    zhat = np.array([[10.0, 1.0], [10.0, 1.1]])
+    C = np.eye(4) * 0.01
+    C[0, 2] = C[2, 0] = C[1, 3] = C[3, 1] = 0.05          # |correlation| > 1: not a covariance
+    z = zhat.copy()
+    with pytest.raises(ValueError, match="not positive definite"):
+        jcbb.jcbb(z, zhat, C, R)
+
+
 def test_jcbb_rejects_what_nearest_neighbour_pairs_wrongly():
     """Two landmarks 1 m apart, the vehicle's heading uncertain: both measurements are shifted
     by the same heading error, so each falls nearest to the other landmark's neighbour. NN

@@ -49,7 +49,7 @@ from ..data.screening import screen
 from ..evaluation.consistency import chi2_quantile
 from ..models.motion import control_table
 from ..perception.association import NEW, REJECTED, associate_fast
-from ..perception.jcbb import jcbb
+from ..perception.jcbb import search_checked
 from .base import FilterBackend, LandmarkModel
 from .config import SlamConfig
 from .results import STATUS, ObservationLog, SlamResult, _landmark_history, _nis_arrays
@@ -303,6 +303,7 @@ class _ScanStep:
         self.truth = cfg.association == "truth"
         self.jcbb = cfg.association == "jcbb"
         self.gate_prob, self.max_nodes = cfg.gate_prob, cfg.jcbb_max_nodes
+        self.R = np.diag([sr**2, sb**2])
         self.truncated = 0                        # JCBB searches stopped at their bound
         self.known = cfg.map_mode == "known"      # localisation: nothing is ever added
 
@@ -360,8 +361,7 @@ class _ScanStep:
         cand = np.flatnonzero((d2 <= self.gate).any(axis=0))
         if cand.size:
             zhat, C = self.filt.joint_prediction(cand)
-            res = jcbb(z, zhat, C, np.diag([self.sr**2, self.sb**2]), gate_prob=self.gate_prob,
-                       joint_prob=self.gate_prob, max_nodes=self.max_nodes)
+            res = search_checked(z, zhat, C, self.R, self.gate_prob, self.gate_prob, self.max_nodes)
             self.truncated += not res.complete
             paired = res.pairs >= 0
             assign[paired] = cand[res.pairs[paired]]
