@@ -124,8 +124,8 @@ def search_checked(z, zhat, C, R, gate_prob: float, joint_prob: float,
                    max_nodes: int) -> JcbbResult:
     """:func:`jcbb` on inputs it has checked (float arrays of the right shapes, R a
     covariance, probabilities in (0, 1), max_nodes >= 1): the run loop's call, whose z come
-    from the screened dataset and zhat, C from the filter (the checks cost about a fifth of
-    a Victoria Park run's association)."""
+    from the screened dataset, zhat and C from the filter, R and the settings from a checked
+    ``SlamConfig``."""
     from scipy.linalg.lapack import dtrtrs         # here: importing it costs 0.2 s
 
     n, L = z.shape[0], zhat.shape[0]
