@@ -93,14 +93,25 @@ def test_the_incremental_search_agrees_with_brute_force_on_deeper_scenes(seed):
 
 
 def test_a_joint_covariance_that_is_not_positive_definite_is_refused():
-    """Each prediction alone is fine, the pair is not (perfectly correlated with opposite
-    signs, and R = 0 is not allowed, so the pair's 4x4 block is made indefinite)."""
+    """Each prediction alone is fine, the pair is not: the cross covariance is larger than
+    the variances (a correlation above 1), so the pair's 4x4 block is indefinite even with R
+    added."""
     zhat = np.array([[10.0, 1.0], [10.0, 1.1]])
     C = np.eye(4) * 0.01
     C[0, 2] = C[2, 0] = C[1, 3] = C[3, 1] = 0.05          # |correlation| > 1: not a covariance
     z = zhat.copy()
     with pytest.raises(ValueError, match="not positive definite"):
         jcbb.jcbb(z, zhat, C, R)
+
+
+def test_a_singular_measurement_noise_is_refused():
+    """With R = 0 a joint covariance of rank below its size would be accepted or refused by
+    rounding (an exactly singular block is not detected reliably): R must be positive
+    definite."""
+    zhat = np.array([[10.0, 1.0]])
+    for bad in (np.zeros((2, 2)), np.diag([0.01, 0.0])):
+        with pytest.raises(ValueError, match="R must be positive definite"):
+            jcbb.jcbb(zhat.copy(), zhat, np.eye(2) * 0.01, bad)
 
 
 def test_jcbb_rejects_what_nearest_neighbour_pairs_wrongly():

@@ -33,7 +33,7 @@ from ..models.geometry import wrap_difference
 from ..models.uncertainty import chi2_quantile
 from .association import mahalanobis_fast
 
-__all__ = ["JcbbResult", "jcbb", "joint_nis", "search_checked"]
+__all__ = ["JcbbResult", "jcbb", "joint_nis"]
 
 
 @dataclass(frozen=True)
@@ -100,6 +100,9 @@ def _check(z, zhat, C, R):
         raise ValueError(f"C must be the ({2 * L}, {2 * L}) joint covariance of {L} candidates' "
                          f"predictions, got shape {C.shape}")
     R = _checks.covariance("R", R, 2)
+    if not (R[0, 0] > 0.0 and R[0, 0] * R[1, 1] - R[0, 1] ** 2 > 0.0):
+        # a singular R lets a singular joint covariance through, accepted or refused by rounding
+        raise ValueError(f"R must be positive definite (a measurement has noise), got {R.tolist()}")
     return z, zhat, C, R
 
 
@@ -117,10 +120,10 @@ def jcbb(z, zhat, C, R, *, gate_prob: float = 0.99, joint_prob: float = 0.99,
     _checks.probability("gate_prob", gate_prob)
     _checks.probability("joint_prob", joint_prob)
     max_nodes = _checks.integer("max_nodes", max_nodes, lo=1)
-    return search_checked(z, zhat, C, R, float(gate_prob), float(joint_prob), max_nodes)
+    return _search_checked(z, zhat, C, R, float(gate_prob), float(joint_prob), max_nodes)
 
 
-def search_checked(z, zhat, C, R, gate_prob: float, joint_prob: float,
+def _search_checked(z, zhat, C, R, gate_prob: float, joint_prob: float,
                    max_nodes: int) -> JcbbResult:
     """:func:`jcbb` on inputs it has checked (float arrays of the right shapes, R a
     covariance, probabilities in (0, 1), max_nodes >= 1): the run loop's call, whose z come
@@ -173,7 +176,7 @@ def search_checked(z, zhat, C, R, gate_prob: float, joint_prob: float,
         m11 = math.sqrt(c)
         e0 = float(nu[0]) / m00
         e1 = (float(nu[1]) - m10 * e0) / m11
-        L2 = np.zeros((k2 + 2, k2 + 2))
+        L2 = np.zeros((k2 + 2, k2 + 2), order="F")          # as LAPACK reads it: no copy
         L2[:k2, :k2] = Lf
         if k2:
             L2[k2:, :k2] = W.T

@@ -49,7 +49,7 @@ from ..data.screening import screen
 from ..evaluation.consistency import chi2_quantile
 from ..models.motion import control_table
 from ..perception.association import NEW, REJECTED, associate_fast
-from ..perception.jcbb import search_checked
+from ..perception.jcbb import _search_checked
 from .base import FilterBackend, LandmarkModel
 from .config import SlamConfig
 from .results import STATUS, ObservationLog, SlamResult, _landmark_history, _nis_arrays
@@ -361,7 +361,8 @@ class _ScanStep:
         cand = np.flatnonzero((d2 <= self.gate).any(axis=0))
         if cand.size:
             zhat, C = self.filt.joint_prediction(cand)
-            res = search_checked(z, zhat, C, self.R, self.gate_prob, self.gate_prob, self.max_nodes)
+            res = _search_checked(z, zhat, C, self.R, self.gate_prob, self.gate_prob,
+                                  self.max_nodes)
             self.truncated += not res.complete
             paired = res.pairs >= 0
             assign[paired] = cand[res.pairs[paired]]
