@@ -20,7 +20,7 @@ import numpy as np
 from ..chapters import ch09_capstone as cap
 from ..models.vehicle import ACFR_UTE
 from ..slam import dense
-from .core import Passed, call, fail, forbids
+from .core import passed, call, fail, forbids
 
 __all__ = ["RUNS", "check_runs", "check_consistency", "check_map", "diagnose", "score", "try_run"]
 
@@ -32,11 +32,6 @@ NEES_LIMITS = (0.75, 6.0)
 MAP_NEES_LIMIT = 3.0
 MAP_RMSE_LIMIT = 0.15
 
-
-def _done(ok: str, quiet: bool) -> Passed:
-    if not quiet:
-        print(ok)
-    return Passed(ok)
 
 
 def _result(fn, run: str, name: str, pieces=None) -> dict:
@@ -209,8 +204,8 @@ def check_runs(my_slam, pieces=None, *, runs=RUNS, name: str = "my_slam",
     covariance)."""
     for run in runs:
         _result(my_slam, run, name, pieces)
-    return _done(f"✓ {name} ran on {len(runs)} simulated run(s) and returned a well-formed "
-                 f"track.", quiet)
+    return passed(f"✓ {name} ran on {len(runs)} simulated run(s) and returned a well-formed "
+                  f"track.", quiet)
 
 
 @_FORBIDS
@@ -236,9 +231,9 @@ def check_consistency(my_slam, pieces=None, *, runs=RUNS, name: str = "my_slam",
                  f"its {s['matched']} landmarks matched to the truth (a consistent map: about 1; "
                  f"accepted up to {MAP_NEES_LIMIT:g}): the map's covariance does not describe its "
                  f"errors.{_cause(pieces)}")
-    return _done(f"✓ {name} is consistent on {len(runs)} run(s): mean pose NEES {nees:.2f} "
-                 f"(3 dof), map NEES per dof at most "
-                 f"{max(s['map_nees_per_dof'] for s in scores):.2f}.", quiet)
+    return passed(f"✓ {name} is consistent on {len(runs)} run(s): mean pose NEES {nees:.2f} "
+                  f"(3 dof), map NEES per dof at most "
+                  f"{max(s['map_nees_per_dof'] for s in scores):.2f}.", quiet)
 
 
 @_FORBIDS
@@ -262,7 +257,7 @@ def check_map(my_slam, pieces=None, *, runs=RUNS, name: str = "my_slam",
                    f"up to {MAP_RMSE_LIMIT:g} m)")
         if msg:
             fail(f"{name} on {run!r}: {msg}.{_cause(pieces)}")
-    return _done(f"✓ {name} mapped every landmark once on {len(runs)} run(s).", quiet)
+    return passed(f"✓ {name} mapped every landmark once on {len(runs)} run(s).", quiet)
 
 
 def score(my_slam, pieces=None, *, runs=RUNS, points=(1, 5, 2)) -> tuple[float, list[str]]:

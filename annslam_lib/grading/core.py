@@ -23,7 +23,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-__all__ = ["GradingError", "Mistake", "Passed", "call", "check_function", "check_jacobian", "check_raises",
+__all__ = ["GradingError", "Mistake", "Passed", "passed", "call", "check_function", "check_jacobian", "check_raises",
            "describe", "fail", "fmt", "NOT_WRITTEN", "forbids", "forbidden", "watch_calls",
            "function_path", "prefetch", "labelled", "passing_prefetch",
            "allowing_library_calls"]
@@ -145,6 +145,14 @@ class Passed(str):
 
     def _ipython_display_(self) -> None:
         pass
+
+
+def passed(message: str, quiet: bool = False) -> Passed:
+    """A check's success: ``message`` printed (unless ``quiet``) and returned as :class:`Passed`."""
+    ok = Passed(message)
+    if not quiet:
+        print(ok)
+    return ok
 
 
 @dataclass(frozen=True)
@@ -504,10 +512,7 @@ def check_function(fn: Callable, reference: Callable, cases: Sequence[Sequence],
                         angle_hint=angle_hint, matrix=False, output=output)
         raise GradingError(msg or _report(run, name=name, labels=labels, notes=_entry_notes(
             run, labels=labels, angle_mask=angle_mask, wrap_mask=wrap_mask, angle_hint=angle_hint)))
-    ok = Passed(f"✓ {name} agrees with {what} on {len(cases)} inputs.")
-    if not quiet:
-        print(ok)
-    return ok
+    return passed(f"✓ {name} agrees with {what} on {len(cases)} inputs.", quiet)
 
 
 def check_jacobian(fn: Callable, reference: Callable, cases: Sequence[Sequence], *, name: str,
@@ -537,10 +542,7 @@ def check_jacobian(fn: Callable, reference: Callable, cases: Sequence[Sequence],
                         output=output)
         raise GradingError(msg or _report(run, name=name, labels=labels, notes=_entry_notes(
             run, labels=labels, angle_mask=no_angles, wrap_mask=no_angles, angle_hint="")))
-    ok = Passed(f"✓ {name} agrees with {what} on {len(cases)} inputs.")
-    if not quiet:
-        print(ok)
-    return ok
+    return passed(f"✓ {name} agrees with {what} on {len(cases)} inputs.", quiet)
 
 
 def check_raises(fn: Callable, args: Sequence, *, name: str, why: str,

@@ -18,15 +18,10 @@ from scipy.stats import chi2
 
 from ..slam import kalman
 from ..slam.dense import kalman_gain
-from .core import GradingError, Mistake, Passed, call, check_function, check_raises, describe, fail, forbids, prefetch
+from .core import GradingError, Mistake, passed, call, check_function, check_raises, describe, fail, forbids, prefetch
 
 __all__ = ["check_update_1d", "check_kalman_gain", "check_gate", "check_steady_state"]
 
-
-def _done(ok: str, quiet: bool) -> Passed:
-    if not quiet:
-        print(ok)
-    return Passed(ok)
 
 
 # ----------------------------------------------------------------------------- 1a.1 1-D update
@@ -107,8 +102,8 @@ def check_update_1d(fn, *, seed: int = 0, n: int = 40, name: str = "my_update_1d
             "somewhere else, has no posterior (K = 0 / 0)")]
     for args, why in bad:
         check_raises(fn, args, name=name, why=why, arg_names=_U_ARGS)
-    return _done(f"✓ {name} agrees with kalman.update_1d on {len(cases)} inputs and raises "
-                 f"ValueError for all {len(bad)} impossible ones.", quiet)
+    return passed(f"✓ {name} agrees with kalman.update_1d on {len(cases)} inputs and raises "
+                  f"ValueError for all {len(bad)} impossible ones.", quiet)
 
 
 # ----------------------------------------------------------------------------- 1a.2 the gain
@@ -198,9 +193,9 @@ def check_kalman_gain(fn, *, seed: int = 0, n: int = 30, name: str = "my_kalman_
             "no covariance")]
     for args, why in bad:
         check_raises(fn, args, name=name, why=why, arg_names=_K_ARGS)
-    return _done(f"✓ {name} agrees with dense.kalman_gain on {len(cases)} inputs (states of 1 "
-                 f"to 6 entries, measurements of 1 to 6) and raises ValueError for all "
-                 f"{len(bad)} S that are not positive definite.", quiet)
+    return passed(f"✓ {name} agrees with dense.kalman_gain on {len(cases)} inputs (states of 1 "
+                  f"to 6 entries, measurements of 1 to 6) and raises ValueError for all "
+                  f"{len(bad)} S that are not positive definite.", quiet)
 
 
 def _check_shapes(fn, cases, *, name, scalar_ok: bool) -> None:
@@ -334,8 +329,8 @@ def check_gate(fn, *, seed: int = 0, n: int = 40, name: str = "my_gate",
         fail(f"{name}({describe(cases[k], _G_ARGS)}) returned {got[k]}, expected {exp[k]}: "
              f"d2 = νᵀ S⁻¹ ν = {d2:.4g} against chi2.ppf({p}, {len(nu)}) = {t:.4g}. "
              f"{sum(g != e for g, e in zip(got, exp))} of {len(cases)} decisions differ.")
-    return _done(f"✓ {name} agrees with kalman.innovation_gate on {len(cases)} innovations of "
-                 f"1 to 3 entries.", quiet)
+    return passed(f"✓ {name} agrees with kalman.innovation_gate on {len(cases)} innovations of "
+                  f"1 to 3 entries.", quiet)
 
 
 # ----------------------------------------------------------------------------- 1a.4 steady state
@@ -388,5 +383,5 @@ def check_steady_state(fn, *, seed: int = 0, n: int = 40, name: str = "my_steady
     check_function(fn, _steady_reference, cases, name=name, arg_names=_S_ARGS,
                    mistakes=mistakes, what="kalman.steady_state_variance", quiet=True,
                    rtol=1e-6, atol=1e-12)
-    return _done(f"✓ {name} agrees with kalman.steady_state_variance on {len(cases)} (q, r) "
-                 f"pairs from 1e-3 to 1e3.", quiet)
+    return passed(f"✓ {name} agrees with kalman.steady_state_variance on {len(cases)} (q, r) "
+                  f"pairs from 1e-3 to 1e3.", quiet)

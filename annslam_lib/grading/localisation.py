@@ -15,7 +15,7 @@ from scipy.stats import chi2
 
 from ..models.observation import observe
 from ..slam import dense, localisation
-from .core import Mistake, Passed, call, check_function, check_raises, describe, fail, forbids, prefetch
+from .core import Mistake, passed, call, check_function, check_raises, describe, fail, forbids, prefetch
 
 __all__ = ["check_beacon_update", "check_nis_verdict"]
 
@@ -139,14 +139,9 @@ def check_beacon_update(fn, *, seed: int = 0, n: int = 40, name: str = "my_beaco
             "bearing, and observation.observe raises ValueError; let it, or raise your own")]
     for args, why in bad:
         check_raises(fn, args, name=name, why=why, arg_names=_U_ARGS)
-    return _done(f"✓ {name} agrees with localisation.beacon_update on {len(cases)} sightings "
-                 f"(across the bearing seam, the heading crossing ±π, random poses).", quiet)
+    return passed(f"✓ {name} agrees with localisation.beacon_update on {len(cases)} sightings "
+                  f"(across the bearing seam, the heading crossing ±π, random poses).", quiet)
 
-
-def _done(ok: str, quiet: bool) -> Passed:
-    if not quiet:
-        print(ok)
-    return Passed(ok)
 
 
 # ----------------------------------------------------------------------------- 4a.2 verdict
@@ -264,5 +259,5 @@ def check_nis_verdict(fn, *, seed: int = 0, n: int = 40, name: str = "my_nis_ver
              f"the average NIS per dof is {avg:.4g}, its {100 * cases[k][2]:.0f} % band "
              f"[{lo:.4g}, {hi:.4g}]. {sum(g != e for g, e in zip(got, exp))} of {len(cases)} "
              f"verdicts differ.")
-    return _done(f"✓ {name} agrees with localisation.nis_verdict on {len(cases)} runs of 1 to "
-                 f"300 updates.", quiet)
+    return passed(f"✓ {name} agrees with localisation.nis_verdict on {len(cases)} runs of 1 to "
+                  f"300 updates.", quiet)

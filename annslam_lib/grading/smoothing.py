@@ -15,7 +15,7 @@ from ..models.geometry import wrap_angle
 from ..models.observation import observe
 from ..smoothing import factors
 from ..smoothing.problem import compose, relative_pose, world_to_tangent
-from .core import Mistake, Passed, check_function, forbids
+from .core import Mistake, passed, check_function, forbids
 
 __all__ = ["check_between_error", "check_bearing_range_error", "check_tangent_to_world"]
 
@@ -23,11 +23,6 @@ _B_ARGS = ("xi", "xj", "delta")
 _BR_ARGS = ("pose", "landmark", "z")
 _T_ARGS = ("S", "phi")
 
-
-def _done(ok: str, quiet: bool) -> Passed:
-    if not quiet:
-        print(ok)
-    return Passed(ok)
 
 
 def _pose(rng, spread=30.0):
@@ -107,9 +102,9 @@ def check_between_error(fn, *, seed: int = 0, n: int = 30, name: str = "my_betwe
     check_function(fn, factors.between_error, cases, name=name, arg_names=_B_ARGS,
                    labels=("v_x", "v_y", "ω"), angles=[2], mistakes=_between_mistakes(name),
                    what="smoothing.factors.between_error", quiet=True, rtol=1e-6, atol=1e-8)
-    return _done(f"✓ {name} agrees with smoothing.factors.between_error (GTSAM's "
-                 f"BetweenFactorPose2) on {len(cases)} pose pairs (errors rotated near 0 and "
-                 "near π, headings across ±π).", quiet)
+    return passed(f"✓ {name} agrees with smoothing.factors.between_error (GTSAM's "
+                  f"BetweenFactorPose2) on {len(cases)} pose pairs (errors rotated near 0 and "
+                  "near π, headings across ±π).", quiet)
 
 
 # ------------------------------------------------------------------- 10.2 bearing-range
@@ -180,9 +175,9 @@ def check_bearing_range_error(fn, *, seed: int = 0, n: int = 30,
                    labels=("bearing error", "range error"), angles=[0],
                    mistakes=_br_mistakes(name), what="smoothing.factors.bearing_range_error",
                    quiet=True, rtol=1e-6, atol=1e-9)
-    return _done(f"✓ {name} agrees with smoothing.factors.bearing_range_error (GTSAM's "
-                 f"BearingRangeFactor2D) on {len(cases)} sightings (across the bearing seam).",
-                 quiet)
+    return passed(f"✓ {name} agrees with smoothing.factors.bearing_range_error (GTSAM's "
+                  f"BearingRangeFactor2D) on {len(cases)} sightings (across the bearing seam).",
+                  quiet)
 
 
 # -------------------------------------------------------------------- 10.3 the marginal
@@ -238,5 +233,5 @@ def check_tangent_to_world(fn, *, seed: int = 0, n: int = 30, name: str = "my_ta
                    output=lambda out: np.ravel(np.asarray(out, dtype=float)),
                    mistakes=_t_mistakes(name), what="smoothing.factors.tangent_to_world",
                    quiet=True, rtol=1e-6, atol=1e-12)
-    return _done(f"✓ {name} agrees with smoothing.factors.tangent_to_world on {len(cases)} "
-                 "covariances.", quiet)
+    return passed(f"✓ {name} agrees with smoothing.factors.tangent_to_world on {len(cases)} "
+                  "covariances.", quiet)
