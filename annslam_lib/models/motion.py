@@ -13,9 +13,11 @@ laser offset transform).
 Fast copies (change them together with :func:`predict` and :func:`_rate`): the filter's
 scalar step ``slam.efficient.EkfSlam.predict`` (Euler and midpoint, with the noise
 dt * Delta * B Q_c B^T), ``slam.dense.DenseEkfSlam.predict`` (calls :func:`predict`), the
-vectorised chain ``slam.dead_reckoning.dead_reckon``, and :func:`control_table`, which
-precomputes what the scalar step needs per odometry sample. ``tests/test_ekf_slam.py``
-and ``tests/test_dead_reckoning.py`` compare each with :func:`predict`.
+stretches compounded between events ``slam.stretches.compound``, the vectorised chain
+``slam.dead_reckoning.dead_reckon``, and :func:`control_table`, which precomputes what the
+scalar step needs per odometry sample. ``tests/test_ekf_slam.py``,
+``tests/test_stretches.py`` and ``tests/test_dead_reckoning.py`` compare each with
+:func:`predict`.
 """
 from __future__ import annotations
 
@@ -195,7 +197,7 @@ def predict_exact(pose, control, dt, vehicle: Vehicle) -> np.ndarray:
 
 
 def control_table(odometry, vehicle: Vehicle, sigma_speed: float, sigma_steer: float,
-                  steer_gain: float = 0.0) -> list:
+                  steer_gain: float = 0.0, *, array: bool = False):
     """Per odometry sample k, the tuple (v_c, alpha, tan alpha, w, dw/dalpha, q00, q01, q11,
     Delta_k) the predictions use: axle speed (``motion.axle_speed``), yaw rate
     w = v_c tan(alpha) / L and its steering derivative, the control covariance Q_c
@@ -205,6 +207,8 @@ def control_table(odometry, vehicle: Vehicle, sigma_speed: float, sigma_steer: f
     sample: the median interval).
 
     Precomputed once, vectorised: the scalar per-step code then only needs cos/sin(phi).
+    A list of tuples; with ``array=True`` the (K, 9) array of the same rows
+    (``slam.stretches.compound`` takes it).
     """
     v_c, J = axle_speed(odometry.speed, odometry.steering, vehicle)
     v_c, J = np.atleast_1d(v_c), np.atleast_2d(J)
@@ -221,4 +225,4 @@ def control_table(odometry, vehicle: Vehicle, sigma_speed: float, sigma_steer: f
     last = float(np.median(dt)) if dt.size else 0.0
     span = np.append(dt, last)
     cols = np.column_stack([v_c, alpha, ta, w, dw, q00, q01, q11, span])
-    return [tuple(row) for row in cols.tolist()]
+    return cols if array else [tuple(row) for row in cols.tolist()]

@@ -239,6 +239,54 @@ class EkfSlam:
             self._dirty = True
         return u, t, n, poses
 
+    def predict_stretch(self, row) -> int:
+        """Advance over one stretch of odometry compounded beforehand (``slam.stretches``:
+        the run loop's step between two events, equal to :meth:`predict_many` over it):
+        ``row`` = (dx, dy, dtheta, q00, q01, q02, q11, q12, q22, steps), the displacement
+        and turn in the frame of the stretch's start and the noise Q gathered there. The
+        pose moves by R(phi) (dx, dy) and dtheta, the vehicle block becomes
+        F P F^T + R0 Q R0^T, and F, a shear by the perpendicular of the displacement,
+        compounds for :meth:`flush`. Returns the number of steps (0: nothing changes)."""
+        dx, dy, dth, q00, q01, q02, q11, q12, q22, steps = row
+        if not steps:
+            return 0
+        p00, p01, p02, p11, p12, p22 = self._p
+        F0, F1 = self._f0, self._f1
+        if self._cx or self._cy:           # fej: as in predict_many
+            e0, e1 = -self._cy, self._cx
+            p00, p01, p02, p11, p12 = (p00 + 2.0 * e0 * p02 + e0 * e0 * p22,
+                                       p01 + e0 * p12 + e1 * p02 + e0 * e1 * p22,
+                                       p02 + e0 * p22,
+                                       p11 + 2.0 * e1 * p12 + e1 * e1 * p22,
+                                       p12 + e1 * p22)
+            F0 += e0
+            F1 += e1
+            self._cx = self._cy = 0.0
+        phi = self._pphi
+        c, s = math.cos(phi), math.sin(phi)
+        wx, wy = c * dx - s * dy, s * dx + c * dy        # the displacement in the world
+        f0, f1 = -wy, wx
+        cc, ss, cs = c * c, s * s, c * s                 # R0 Q R0^T
+        r00 = cc * q00 - 2.0 * cs * q01 + ss * q11
+        r01 = cs * (q00 - q11) + (cc - ss) * q01
+        r11 = ss * q00 + 2.0 * cs * q01 + cc * q11
+        r02, r12 = c * q02 - s * q12, s * q02 + c * q12
+        self._p = [p00 + 2.0 * f0 * p02 + f0 * f0 * p22 + r00,
+                   p01 + f0 * p12 + f1 * p02 + f0 * f1 * p22 + r01,
+                   p02 + f0 * p22 + r02,
+                   p11 + 2.0 * f1 * p12 + f1 * f1 * p22 + r11,
+                   p12 + f1 * p22 + r12,
+                   p22 + q22]
+        self._px += wx
+        self._py += wy
+        phi += dth
+        if not -_PI < phi <= _PI:
+            phi = _PI - (_PI - phi) % _TWO_PI
+        self._pphi = phi
+        self._f0, self._f1 = F0 + f0, F1 + f1
+        self._dirty = True
+        return steps
+
     # ---- read access
     @property
     def n_landmarks(self) -> int:

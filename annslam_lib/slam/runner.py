@@ -52,6 +52,7 @@ from ..perception.association import NEW, REJECTED, associate_fast
 from ..perception.jcbb import _search_checked
 from .base import FilterBackend, LandmarkModel
 from .config import SlamConfig
+from . import stretches
 from .results import STATUS, ObservationLog, SlamResult, _landmark_history, _nis_arrays
 from .efficient import diag_blocks
 from .threads import one_blas_thread
@@ -412,7 +413,8 @@ def _run(dataset, config, progress, backend, landmark_model=None, inspect=None) 
         book.known(ds.beacons.shape[0], float(odo.t[0]) if len(odo) else 0.0)
     if inspect is not None:
         inspect(filt)
-    controls = control_table(odo, ds.vehicle, cfg.sigma_speed, cfg.sigma_steer, cfg.steer_noise_gain)
+    controls = control_table(odo, ds.vehicle, cfg.sigma_speed, cfg.sigma_steer,
+                             cfg.steer_noise_gain, array=True)
     lmodel = _landmark_model(cfg, landmark_model)
     sr, sb = cfg.sigma_range, cfg.sigma_bearing
     if lmodel is not None:                     # the model's pseudo-measurement noise R'
@@ -429,7 +431,6 @@ def _run(dataset, config, progress, backend, landmark_model=None, inspect=None) 
     cov_rows: list[tuple] = []             # its covariance (6 unique entries)
     scans_done: list[int] = []
     pose_prior = np.full((n_scans, 3), np.nan)
-    odo_rows: list[tuple] = []             # the filtered pose at every odometry sample
     nis_rows = []                          # (t, scan, kind, nis, dof, accepted)
     health_rows = []
     counts = dict(predicts=0, scans=0, scans_skipped=0, gps_updates=0, gps_rejected=0,
@@ -441,25 +442,33 @@ def _run(dataset, config, progress, backend, landmark_model=None, inspect=None) 
         health_rows.append((scan, t, filt.state()[0].size, lo, asym))
 
     ev_t, ev_code, ev_idx, ev_k = _events(odo.t, ds.gps.t, det.t)
-    odo_t = odo.t.tolist()
-    bar = _progress(progress, len(odo_t) + len(ev_t))
-    cur_t, u, k_done = t0, None, 0
-    for t, code, idx, k_end in zip(ev_t, ev_code, ev_idx, ev_k):
-        if k_end > k_done:                 # the odometry samples before this event
-            u, cur_t, n, poses = filt.predict_many(u, cur_t, odo_t[k_done:k_end],
-                                                   controls[k_done:k_end])
-            counts["predicts"] += n
-            odo_rows += poses
-            if bar is not None:
-                bar.update(k_end - k_done)
-            k_done = k_end
-        if t < t0 or u is None:            # before the first odometry sample
+    # the predictions between events, compounded for the whole run at once (slam.stretches);
+    # the dense reference replays them step by step
+    legs = stretches.compound(odo.t, controls, ev_t, ev_k, ds.vehicle,
+                              cfg.motion_model == "midpoint")
+    starts = np.full((len(ev_t) + 1, 3), np.nan)     # the pose at each stretch's start
+    if backend == "efficient":
+        def advance(s: int) -> None:
+            starts[s] = filt.pose_tuple()
+            counts["predicts"] += filt.predict_stretch(legs.rows[s])
+    else:
+        rows = [tuple(r) for r in controls.tolist()]
+
+        def advance(s: int) -> None:
+            starts[s] = filt.pose_tuple()
+            for h, dt in legs.steps_of(s):
+                filt.predict(rows[h], dt)
+                counts["predicts"] += 1
+    bar = _progress(progress, len(odo.t) + len(ev_t))
+    cur_t = t0
+    for e, (t, code, idx, k_end) in enumerate(zip(ev_t, ev_code, ev_idx, ev_k)):
+        if bar is not None:
+            bar.update(k_end + e + 1 - bar.n)
+        if not legs.processed[e]:          # before the first odometry sample
             counts["scans_skipped" if code == 2 else "gps_skipped"] += 1
             continue
-        if t > cur_t:
-            filt.predict(u, t - cur_t)
-            counts["predicts"] += 1
-            cur_t = t
+        advance(e)
+        cur_t = t
         if code == 0:                      # GPS fix
             if t > gps_until:
                 counts["gps_skipped"] += 1
@@ -480,11 +489,10 @@ def _run(dataset, config, progress, backend, landmark_model=None, inspect=None) 
         cov_rows.append(filt.pose_cov_entries())
         if counts["scans"] % cfg.checkpoint_every == 0:
             checkpoint(idx, t)
-    if k_done < len(odo_t):                # odometry after the last event
-        u, cur_t, n, poses = filt.predict_many(u, cur_t, odo_t[k_done:], controls[k_done:])
-        counts["predicts"] += n
-        odo_rows += poses
+    advance(len(ev_t))                     # odometry after the last event
+    cur_t = max(cur_t, float(odo.t[-1]))
     if bar is not None:
+        bar.update(bar.total - bar.n)
         bar.close()
     book.prune(filt, cur_t, True)
     checkpoint(scans_done[-1] if scans_done else -1, cur_t)
@@ -492,11 +500,11 @@ def _run(dataset, config, progress, backend, landmark_model=None, inspect=None) 
     if cfg.association == "jcbb":
         counts["jcbb_truncated"] = scan_step.truncated
     return _assemble(filt, book, dets, cfg, counts, traj_rows, cov_rows, scans_done, pose_prior,
-                     odo_rows, nis_rows, health_rows, pose0, init_info, t_start)
+                     legs.sample_poses(starts), nis_rows, health_rows, pose0, init_info, t_start)
 
 
 def _assemble(filt, book, dets, cfg, counts, traj_rows, cov_rows, scans_done, pose_prior,
-              odo_rows, nis_rows, health_rows, pose0, init_info, t_start) -> SlamResult:
+              odo_traj, nis_rows, health_rows, pose0, init_info, t_start) -> SlamResult:
     """The :class:`SlamResult` of a finished run: arrays from the rows collected, the
     per-detection log, the landmarks' histories."""
     det = dets.det
@@ -532,7 +540,6 @@ def _assemble(filt, book, dets, cfg, counts, traj_rows, cov_rows, scans_done, po
     lm_obs, lm_true = _landmark_history(log, M)
     health = {k: np.array([r[i] for r in health_rows]) for i, k in
               enumerate(("scan", "t", "n", "min_eig", "asymmetry"))}
-    odo_traj = np.array(odo_rows, dtype=float).reshape(len(odo_rows), 4)
     return SlamResult(
         trajectory=traj, scan_index=traj_scan, pose_cov=traj_cov,
         odometry_trajectory=odo_traj,
