@@ -5,6 +5,7 @@
 - ``efficient``: the filter written to scale (``EkfSlam``)
 - ``dense``: the textbook dense reference it is tested against, and the update's steps
 - ``runner``: ``run()``, the event loop, landmark book-keeping and result assembly
+- ``stretches``: the odometry between events, compounded once for a run
 - ``results``: ``SlamResult`` and the per-detection log
 - ``dead_reckoning``: odometry alone, and the initial pose from GPS
 - ``threads``: single-threaded BLAS while a run goes
@@ -16,7 +17,7 @@ from __future__ import annotations
 from .._lazy import attach
 
 __getattr__, __dir__, __all__ = attach(
-    __name__, ["config", "base", "efficient", "dense", "runner", "results", "dead_reckoning",
-               "threads", "kalman", "localisation"],
+    __name__, ["config", "base", "efficient", "dense", "runner", "stretches", "results",
+               "dead_reckoning", "threads", "kalman", "localisation"],
     {"run": "runner", "SlamConfig": "config", "SlamResult": "results", "EkfSlam": "efficient",
      "DenseEkfSlam": "dense"})

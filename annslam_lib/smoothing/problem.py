@@ -6,7 +6,7 @@ Built from an EKF run (:func:`build_problem`) with the course's own models:
 - one pose per EVENT the filter processed (every scan, every GPS fix it used) plus a start
   pose at the first odometry sample;
 - between two consecutive poses, the odometry factor: the course's motion model
-  (``SlamConfig.motion_model``, the same steps as the filter's ``predict_many``) run from
+  (``SlamConfig.motion_model``, the run loop's steps, ``slam.stretches``) run from
   the first pose with zero covariance to the second pose's time gives the relative pose
   Delta = X_k^-1 X_{k+1} and its covariance; the covariance is moved from the world frame
   (the filter's additive (dx, dy, dphi)) to GTSAM's tangent space at the second pose
@@ -37,6 +37,7 @@ from ..data.screening import screen
 from ..models.geometry import wrap_angle
 from ..models.motion import control_table
 from ..slam.config import SlamConfig
+from ..slam import stretches
 from ..slam.efficient import EkfSlam
 from ..slam.results import STATUS, SlamResult
 
@@ -199,38 +200,32 @@ def build_problem(dataset: Dataset, result: SlamResult, *, min_sightings: int = 
     is_node_gps[gps_used] = True
 
     controls = control_table(odo, ds.vehicle, cfg.sigma_speed, cfg.sigma_steer,
-                             cfg.steer_noise_gain)
+                             cfg.steer_noise_gain, array=True)
     t0, pose0 = float(odo.t[0]), np.asarray(result.initial_pose, float)
     zero = np.zeros((3, 3))
     ev_t, ev_code, ev_idx, ev_k = _events(odo.t, gps.t, det_t)
-    odo_t = odo.t.tolist()
+    # the run loop's predictions between events (slam.stretches), chained from node to node
+    legs = stretches.compound(odo.t, controls, ev_t, ev_k, ds.vehicle,
+                              cfg.motion_model == "midpoint")
+    starts = np.full((len(ev_t) + 1, 3), np.nan)       # the chain's pose at each stretch start
+    start_node = np.zeros(len(ev_t) + 1, dtype=np.int64)
     nodes_t, nodes_kind, nodes_scan, dr = [t0], [KIND["start"]], [-1], [pose0]
-    deltas, covs, dense_t, dense_node, dense_rel = [], [], [], [], []
+    deltas, covs = [], []
     filt = EkfSlam(pose0, zero, ds.vehicle, cfg.motion_model)
-    cur_t, u, k_done, floored = t0, None, 0, 0
+    floored = 0
     ekf_pose = {}
     for tr, s in zip(result.trajectory, scans.tolist()):
         ekf_pose[("scan", s)] = tr[1:]
 
-    def advance(k_end):
-        nonlocal u, cur_t, k_done
-        if k_end > k_done:
-            u, cur_t, _, poses = filt.predict_many(u, cur_t, odo_t[k_done:k_end],
-                                                   controls[k_done:k_end])
-            if poses:
-                p = np.array(poses, dtype=float)
-                dense_t.append(p[:, 0])
-                dense_node.append(np.full(p.shape[0], len(nodes_t) - 1, dtype=np.int64))
-                dense_rel.append(relative_pose(dr[-1], p[:, 1:]))
-            k_done = k_end
+    def advance(s: int) -> None:
+        starts[s] = filt.pose_tuple()
+        start_node[s] = len(nodes_t) - 1
+        filt.predict_stretch(legs.rows[s])
 
-    for t, code, idx, k_end in zip(ev_t, ev_code, ev_idx, ev_k):
-        advance(k_end)
-        if t < t0 or u is None:
+    for e, (t, code, idx) in enumerate(zip(ev_t, ev_code, ev_idx)):
+        if not legs.processed[e]:
             continue
-        if t > cur_t:                    # as the run loop: predict to every event's time
-            filt.predict(u, t - cur_t)
-            cur_t = t
+        advance(e)
         if not (is_node_scan[idx] if code == 2 else is_node_gps[idx]):
             continue
         pose, P = filt.pose, filt.pose_cov
@@ -251,7 +246,10 @@ def build_problem(dataset: Dataset, result: SlamResult, *, min_sightings: int = 
         else:
             node_of_gps[idx] = len(nodes_t) - 1
         filt = EkfSlam(pose, zero, ds.vehicle, cfg.motion_model)
-    advance(len(odo_t))
+    advance(len(ev_t))
+    samples = legs.sample_poses(starts)              # every odometry sample, on the chain
+    dense_node = start_node[legs.sample_stretch]
+    dense_rel = relative_pose(np.array(dr)[dense_node], samples[:, 1:])
     if not np.all(node_of_scan[scans] >= 0):
         raise ValueError("the run's scans do not match the dataset's detections: pass the "
                          "dataset the result was computed from")
@@ -292,9 +290,7 @@ def build_problem(dataset: Dataset, result: SlamResult, *, min_sightings: int = 
         prior_cov=world_to_tangent(P0, pose0[2]) + np.diag([floor[0] ** 2, floor[0] ** 2, floor[1] ** 2]),
         initial_poses=init,
         initial_landmarks=result.landmarks[keep].copy(), dead_reckoning=np.array(dr),
-        dense_t=np.concatenate(dense_t) if dense_t else np.empty(0),
-        dense_node=np.concatenate(dense_node) if dense_node else np.empty(0, np.int64),
-        dense_rel=np.concatenate(dense_rel) if dense_rel else np.empty((0, 3)),
+        dense_t=samples[:, 0], dense_node=dense_node, dense_rel=dense_rel,
         landmark_ekf=keep, counts=counts)
 
 
