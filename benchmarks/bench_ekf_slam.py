@@ -2,6 +2,8 @@
 textbook reference (annslam_lib.slam.dense), measured side by side in one process.
 
     OMP_NUM_THREADS=1 ANNSLAM_DATA=<data folder> python benchmarks/bench_ekf_slam.py [--quick]
+    OMP_NUM_THREADS=1 ANNSLAM_DATA=<data folder> python benchmarks/bench_ekf_slam.py \
+        --against REF [REF ...] [--rounds N]
 
 Prints figures only (not a test: timings depend on the machine and its load).
 - per step (one odometry prediction + one update with one observation) at N = 50, 150,
@@ -9,14 +11,26 @@ Prints figures only (not a test: timings depend on the machine and its load).
 - the first 200 s of Victoria Park with each backend (the dense one is too slow for the
   whole run), and the ratio;
 - the Car Park and the full Victoria Park run with their default configurations (best of
-  five, CPU time), against the target of 2.0 s CPU for Victoria Park (issue 12).
+  five, CPU time), against the target of 2.0 s CPU for Victoria Park (issues 12, 23).
+
+``--against REF ...`` times only the whole Victoria Park run, of this checkout and of each
+git revision REF (checked out into a temporary worktree), each in its own process that
+imports that library, alternating over ``--rounds`` rounds of three runs so that all see
+the same machine; prints each one's best and median CPU, its counts (the same decisions
+give the same counts) and the ratio current / REF. Issue 23 asked for 2.0 s where the run
+took 2.41 s: a ratio of 0.83 against the code of that time.
 """
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
+import subprocess
+import sys
+import tempfile
 import time
+from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -33,7 +47,8 @@ from annslam_lib.slam import config as slam_config  # noqa: E402
 from annslam_lib.slam import efficient, runner  # noqa: E402
 from annslam_lib.slam.dense import DenseEkfSlam  # noqa: E402
 
-VP_TARGET_CPU = 2.0            # seconds, issue 12
+VP_TARGET_CPU = 2.0            # seconds, issues 12 and 23
+ROOT = Path(__file__).resolve().parents[1]
 
 SIGMA_R, SIGMA_B = 0.1, math.radians(1.0)
 
@@ -130,10 +145,75 @@ def whole_run(name: str, repeats: int = 5) -> float:
     return min(cpus)
 
 
+def _child(tree: str, repeats: int) -> None:
+    """In a process of its own: the whole Victoria Park run of the library in ``tree``
+    (warm once, then ``repeats`` timed runs); prints a JSON line."""
+    import annslam_lib
+    if not Path(annslam_lib.__file__).resolve().is_relative_to(Path(tree).resolve()):
+        raise SystemExit(f"imported {annslam_lib.__file__}, not the library in {tree}")
+    ds = loaders.load("victoria_park")
+    cfg = slam_config.SlamConfig.for_dataset("victoria_park")
+    runner.run(ds, cfg, progress=False)
+    cpus = []
+    for _ in range(repeats):
+        c = time.process_time()
+        r = runner.run(ds, cfg, progress=False)
+        cpus.append(time.process_time() - c)
+    keys = ("scans", "updates", "associated", "new", "rejected", "landmarks")
+    print(json.dumps({"cpu": cpus, "counts": {k: r.counts[k] for k in keys}}))
+
+
+def side_by_side(refs: list[str], rounds: int) -> None:
+    """The Victoria Park run of this checkout against the revisions ``refs`` (module
+    docstring)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        trees = {"current": ROOT}
+        for i, ref in enumerate(refs):
+            where = Path(tmp) / f"ref{i}"
+            subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", "-q",
+                            str(where), ref], check=True)
+            trees[ref] = where
+        try:
+            got = {name: {"cpu": []} for name in trees}
+            for _ in range(rounds):
+                for name, tree in trees.items():
+                    env = dict(os.environ, PYTHONPATH=str(tree), OMP_NUM_THREADS="1",
+                               OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
+                    out = subprocess.run([sys.executable, __file__, "--child", str(tree)],
+                                         env=env, capture_output=True, text=True, check=True)
+                    res = json.loads(out.stdout.strip().splitlines()[-1])
+                    got[name]["cpu"] += res["cpu"]
+                    got[name]["counts"] = res["counts"]
+        finally:
+            for name, tree in trees.items():
+                if name != "current":
+                    subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force",
+                                    str(tree)], check=False)
+    print(f"Victoria Park, whole run, CPU s ({rounds} rounds of 3 runs each, alternating):")
+    best = {name: min(g["cpu"]) for name, g in got.items()}
+    for name, g in got.items():
+        ratio = "" if name == "current" else f"; current / this = {best['current'] / best[name]:.3f}"
+        print(f"  {name:>10}: best {best[name]:.3f}, median {float(np.median(g['cpu'])):.3f} "
+              f"(of {len(g['cpu'])}); counts {g['counts']}{ratio}")
+    verdict = "met" if best["current"] < VP_TARGET_CPU else "NOT met"
+    print(f"target under {VP_TARGET_CPU:.1f} s CPU on this machine: {best['current']:.2f} s, "
+          f"{verdict}; issue 23's ratio: 0.83 (2.0 s where the run took 2.41 s)")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer repetitions")
+    parser.add_argument("--against", nargs="+", metavar="REF",
+                        help="git revisions: time the Victoria Park run side by side")
+    parser.add_argument("--rounds", type=int, default=3, help="rounds of --against (3)")
+    parser.add_argument("--child", help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.child:
+        _child(args.child, 3)
+        return
+    if args.against:
+        side_by_side(args.against, args.rounds)
+        return
     print(f"OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS')}, numpy {np.__version__}")
     per_step(quick=args.quick)
     backends_side_by_side(100.0 if args.quick else 200.0)
