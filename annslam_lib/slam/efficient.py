@@ -174,21 +174,7 @@ class EkfSlam:
         motion Jacobians compound into (f0, f1) for :meth:`flush`."""
         a, b, L, mid = self._a, self._b, self._L, self._mid
         px, py, phi = self._px, self._py, self._pphi
-        p00, p01, p02, p11, p12, p22 = self._p
-        F0, F1 = self._f0, self._f1
-        if self._cx or self._cy:
-            # fej, after an update (module docstring): the first step's Jacobian at the prior
-            # position is F(step) E with the shear E = [[1, 0, e0], [0, 1, e1], [0, 0, 1]],
-            # (e0, e1) = (-cy, cx): E applied once, here, to these local copies (kept only if
-            # a step is taken, else the correction waits for the next call)
-            e0, e1 = -self._cy, self._cx
-            p00, p01, p02, p11, p12 = (p00 + 2.0 * e0 * p02 + e0 * e0 * p22,
-                                       p01 + e0 * p12 + e1 * p02 + e0 * e1 * p22,
-                                       p02 + e0 * p22,
-                                       p11 + 2.0 * e1 * p12 + e1 * e1 * p22,
-                                       p12 + e1 * p22)
-            F0 += e0
-            F1 += e1
+        p00, p01, p02, p11, p12, p22, F0, F1 = self._prediction_start()
         cos, sin = math.cos, math.sin
         n = 0
         poses = [] if record else None
@@ -239,6 +225,26 @@ class EkfSlam:
             self._dirty = True
         return u, t, n, poses
 
+    def _prediction_start(self) -> tuple:
+        """The vehicle block's six entries and the compounded shear (F0, F1) a prediction
+        starts from. With fej, after an update (module docstring), the first step's
+        Jacobian at the prior position is F(step) E with the shear
+        E = [[1, 0, e0], [0, 1, e1], [0, 0, 1]], (e0, e1) = (-cy, cx): E is applied here, to
+        the copies returned; the caller clears (cx, cy) once it has taken a step (until
+        then the correction waits)."""
+        p00, p01, p02, p11, p12, p22 = self._p
+        F0, F1 = self._f0, self._f1
+        if self._cx or self._cy:
+            e0, e1 = -self._cy, self._cx
+            p00, p01, p02, p11, p12 = (p00 + 2.0 * e0 * p02 + e0 * e0 * p22,
+                                       p01 + e0 * p12 + e1 * p02 + e0 * e1 * p22,
+                                       p02 + e0 * p22,
+                                       p11 + 2.0 * e1 * p12 + e1 * e1 * p22,
+                                       p12 + e1 * p22)
+            F0 += e0
+            F1 += e1
+        return p00, p01, p02, p11, p12, p22, F0, F1
+
     def predict_stretch(self, row) -> int:
         """Advance over one stretch of odometry compounded beforehand (``slam.stretches``:
         the run loop's step between two events, equal to :meth:`predict_many` over it):
@@ -250,18 +256,8 @@ class EkfSlam:
         dx, dy, dth, q00, q01, q02, q11, q12, q22, steps = row
         if not steps:
             return 0
-        p00, p01, p02, p11, p12, p22 = self._p
-        F0, F1 = self._f0, self._f1
-        if self._cx or self._cy:           # fej: as in predict_many
-            e0, e1 = -self._cy, self._cx
-            p00, p01, p02, p11, p12 = (p00 + 2.0 * e0 * p02 + e0 * e0 * p22,
-                                       p01 + e0 * p12 + e1 * p02 + e0 * e1 * p22,
-                                       p02 + e0 * p22,
-                                       p11 + 2.0 * e1 * p12 + e1 * e1 * p22,
-                                       p12 + e1 * p22)
-            F0 += e0
-            F1 += e1
-            self._cx = self._cy = 0.0
+        p00, p01, p02, p11, p12, p22, F0, F1 = self._prediction_start()
+        self._cx = self._cy = 0.0
         phi = self._pphi
         c, s = math.cos(phi), math.sin(phi)
         wx, wy = c * dx - s * dy, s * dx + c * dy        # the displacement in the world
