@@ -46,24 +46,22 @@ def _event_action(f, code, k):
         f.gps_update([x + 0.3, y - 0.2], 0.5)
 
 
-@pytest.mark.parametrize("fej", [False, True])
-@pytest.mark.parametrize("motion_model", ["euler", "midpoint"])
-@pytest.mark.parametrize("seed", [0, 1, 2])
-def test_compounded_stretches_equal_the_step_by_step_loop(seed, motion_model, fej):
-    odo, gps_t, scan_t = _schedule(seed)
-    controls = control_table(odo, ACFR_UTE, 0.7, math.radians(7))
+def _both_loops(odo, gps_t, scan_t, motion_model, fej, check_each=True):
+    """The run loop as it was (predict_many over the samples before each event, then a
+    partial step to its time) and the stretches, side by side on two filters, with the
+    same event action; returns what each did."""
+    rows = control_table(odo, ACFR_UTE, 0.7, math.radians(7), 0.1)
     ev_t, ev_code, _, ev_k = _events(odo.t, gps_t, scan_t)
-    legs = stretches.compound(odo.t, np.array(controls), ev_t, ev_k, ACFR_UTE,
+    legs = stretches.compound(odo.t, np.array(rows), ev_t, ev_k, ACFR_UTE,
                               motion_model == "midpoint")
     ref, new = _filter(EkfSlam, fej, motion_model), _filter(EkfSlam, fej, motion_model)
-    # the run loop as it was: predict_many over the samples, then a partial step
     odo_t = odo.t.tolist()
     t0, cur_t, u, k_done, steps, recorded = odo_t[0], odo_t[0], None, 0, 0, []
     starts = np.full((len(ev_t) + 1, 3), np.nan)
     skipped = []
     for e, (t, code, k_end) in enumerate(zip(ev_t, ev_code, ev_k)):
         if k_end > k_done:
-            u, cur_t, n, poses = ref.predict_many(u, cur_t, odo_t[k_done:k_end], controls[k_done:k_end])
+            u, cur_t, n, poses = ref.predict_many(u, cur_t, odo_t[k_done:k_end], rows[k_done:k_end])
             steps += n
             recorded += poses
             k_done = k_end
@@ -78,28 +76,79 @@ def test_compounded_stretches_equal_the_step_by_step_loop(seed, motion_model, fe
         steps -= new.predict_stretch(legs.rows[e])
         for f in (ref, new):
             _event_action(f, code, e)
-        np.testing.assert_allclose(new.pose, ref.pose, rtol=0, atol=1e-12)
-        np.testing.assert_allclose(new.state()[1], ref.state()[1], rtol=0, atol=1e-12)
-    u, cur_t, n, poses = ref.predict_many(u, cur_t, odo_t[k_done:], controls[k_done:])
+        if check_each:
+            np.testing.assert_allclose(new.pose, ref.pose, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(new.state()[1], ref.state()[1], rtol=0, atol=1e-12)
+    u, cur_t, n, poses = ref.predict_many(u, cur_t, odo_t[k_done:], rows[k_done:])
     steps += n
     recorded += poses
     starts[-1] = new.pose_tuple()
     steps -= new.predict_stretch(legs.rows[-1])
-    assert steps == 0                                   # the same number of steps taken
-    assert skipped == np.flatnonzero(~legs.processed).tolist() and len(skipped) >= 2
-    np.testing.assert_allclose(new.state()[0], ref.state()[0], rtol=0, atol=1e-12)
+    return dict(ref=ref, new=new, steps=steps, skipped=skipped, legs=legs,
+                recorded=np.array(recorded).reshape(-1, 4), rebuilt=legs.sample_poses(starts))
+
+
+def _assert_same(out, n_samples):
+    ref, new, legs = out["ref"], out["new"], out["legs"]
+    assert out["steps"] == 0                            # the same number of steps taken
+    assert out["skipped"] == np.flatnonzero(~legs.processed).tolist()
+    d = new.state()[0] - ref.state()[0]
+    d[2] = (d[2] + np.pi) % (2 * np.pi) - np.pi
+    np.testing.assert_allclose(d, 0.0, atol=1e-12)
     np.testing.assert_allclose(new.state()[1], ref.state()[1], rtol=0, atol=1e-12)
-    # the pose at every odometry sample, rebuilt from the stretches' starts
-    rebuilt = legs.sample_poses(starts)
-    rec = np.array(recorded)
-    assert rebuilt.shape == rec.shape == (len(odo_t), 4)
+    rebuilt, rec = out["rebuilt"], out["recorded"]
+    assert rebuilt.shape == rec.shape == (n_samples, 4)
     np.testing.assert_array_equal(rebuilt[:, 0], rec[:, 0])
     np.testing.assert_allclose(rebuilt[:, 1:3], rec[:, 1:3], rtol=0, atol=1e-12)
     dphi = (rebuilt[:, 3] - rec[:, 3] + np.pi) % (2 * np.pi) - np.pi
     np.testing.assert_allclose(dphi, 0.0, atol=1e-12)
     assert np.all((rebuilt[:, 3] > -np.pi) & (rebuilt[:, 3] <= np.pi))
+
+
+@pytest.mark.parametrize("fej", [False, True])
+@pytest.mark.parametrize("motion_model", ["euler", "midpoint"])
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_compounded_stretches_equal_the_step_by_step_loop(seed, motion_model, fej):
+    odo, gps_t, scan_t = _schedule(seed)
+    out = _both_loops(odo, gps_t, scan_t, motion_model, fej)
+    _assert_same(out, len(odo.t))
+    assert len(out["skipped"]) >= 2
     # the heading (from 3.0 rad) turned over a radian and crossed +-pi
+    rec = out["recorded"]
     assert np.ptp(np.unwrap(rec[:, 3])) > 1.0 and np.ptp(rec[:, 3]) > np.pi
+
+
+def _edge_schedule(rng, case: str):
+    """Short runs with the run loop's corner cases: one sample, repeated sample times, no
+    event, events only after the last sample or only before the first, a fix and a scan
+    at a sample time and at one time together."""
+    K = 1 if case == "one sample" else int(rng.integers(2, 12))
+    gaps = rng.uniform(0.01, 0.1, K)
+    if case == "repeated times":
+        gaps[1:][rng.random(K - 1) < 0.4] = 0.0
+    t = 5.0 + np.cumsum(gaps)
+    odo = Odometry(t=t, speed=rng.uniform(-1.0, 6.0, K), steering=rng.uniform(-0.5, 0.5, K))
+    if case == "no events":
+        return odo, np.empty(0), np.empty(0)
+    if case == "only after":
+        return odo, np.empty(0), t[-1] + np.sort(rng.uniform(0.0, 1.0, 3))
+    if case == "only before":
+        return odo, t[0] - np.sort(rng.uniform(0.0, 1.0, 2)), np.empty(0)
+    at = rng.choice(t, 2)
+    gps = np.sort(np.concatenate([rng.uniform(t[0] - 0.2, t[-1] + 0.2, 3), at, [t[0]]]))
+    scans = np.sort(np.concatenate([rng.uniform(t[0] - 0.2, t[-1] + 0.2, 5), at, [t[0], t[-1]]]))
+    return odo, gps, scans
+
+
+@pytest.mark.parametrize("case", ["one sample", "repeated times", "no events", "only after",
+                                  "only before", "mixed"])
+def test_the_run_loops_corner_cases(case):
+    for seed in range(12):
+        rng = np.random.default_rng(seed)
+        odo, gps_t, scan_t = _edge_schedule(rng, case)
+        for motion_model in ("euler", "midpoint"):
+            for fej in (False, True):
+                _assert_same(_both_loops(odo, gps_t, scan_t, motion_model, fej, False), len(odo.t))
 
 
 def test_replayed_steps_are_the_loops_steps():
@@ -140,11 +189,19 @@ def test_malformed_schedules_are_refused():
     odo, gps_t, scan_t = _schedule(0)
     controls = np.array(control_table(odo, ACFR_UTE, 0.7, 0.1))
     ev_t, _, _, ev_k = _events(odo.t, gps_t, scan_t)
-    with pytest.raises(ValueError, match="equal lengths"):
-        stretches.compound(odo.t, controls[:-1], ev_t, ev_k, ACFR_UTE, False)
-    with pytest.raises(ValueError, match="equal lengths"):
-        stretches.compound(odo.t, controls, ev_t, ev_k[:-1], ACFR_UTE, False)
-    with pytest.raises(ValueError, match="nondecreasing"):
-        stretches.compound(odo.t, controls, ev_t, np.asarray(ev_k)[::-1], ACFR_UTE, False)
-    with pytest.raises(ValueError, match="nondecreasing"):
-        stretches.compound(odo.t, controls, ev_t, np.asarray(ev_k) + len(odo.t), ACFR_UTE, False)
+    ev_t, ev_k, t = np.asarray(ev_t), np.asarray(ev_k), odo.t
+    cases = [
+        ((t, controls[:-1], ev_t, ev_k), "equal lengths"),
+        ((t, controls, ev_t, ev_k[:-1]), "equal lengths"),
+        ((t, controls, ev_t, ev_k[::-1]), "nondecreasing sample counts"),
+        ((t, controls, ev_t, ev_k + len(t)), "nondecreasing sample counts"),
+        ((t[::-1], controls, ev_t, ev_k), "times must be nondecreasing"),
+        ((t, controls, ev_t[::-1], ev_k), "times must be nondecreasing"),
+        ((np.where(np.arange(t.size) == 5, np.nan, t), controls, ev_t, ev_k), "finite"),
+        ((t, np.where(controls == controls[3, 0], np.inf, controls), ev_t, ev_k), "finite"),
+        ((t, controls, ev_t - 1.0, ev_k), "count the odometry samples"),   # events moved earlier
+        ((t, controls, ev_t + 1.0, ev_k), "count the odometry samples"),   # and later
+    ]
+    for args, match in cases:
+        with pytest.raises(ValueError, match=match):
+            stretches.compound(*args, ACFR_UTE, False)

@@ -115,7 +115,10 @@ class FilterBackend(Protocol):
 
     Construction: ``Backend(x0, P0, vehicle, motion_model)``. Prediction: ``predict(u, dt)``
     with a row ``u`` of ``models.motion.control_table`` (the control held over the step,
-    with its noise); ``predict_many(rows, dts)`` runs a stretch of such steps in one call.
+    with its noise); ``predict_many(u, t, times, rows)`` runs a stretch of odometry samples
+    step by step. (The run loop predicts the efficient filter by
+    ``EkfSlam.predict_stretch``, stretches compounded beforehand, ``slam.stretches``, and
+    any other backend by its ``predict``, step by step.)
     Observation: ``observation_model(sigma_range, sigma_bearing)`` -> (zhat (N, 2), S
     (N, 2, 2)) of every landmark; ``innovation_d2(z, sigma_range, sigma_bearing)`` -> the
     squared Mahalanobis distances (n, N) of detections to them, for gating; ``update(z, lm, sigma_range, sigma_bearing)`` ->
@@ -129,7 +132,7 @@ class FilterBackend(Protocol):
     n_landmarks: int
 
     def predict(self, u, dt: float) -> None: ...
-    def predict_many(self, rows, dts) -> None: ...
+    def predict_many(self, u, t: float, times, rows, *, record: bool = True): ...
     def observation_model(self, sigma_range: float, sigma_bearing: float): ...
     def innovation_d2(self, z, sigma_range: float, sigma_bearing: float): ...
     def update(self, z, lm, sigma_range: float, sigma_bearing: float): ...

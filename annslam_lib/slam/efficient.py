@@ -56,7 +56,8 @@ First-estimates Jacobians (``fej=True``; Huang, Mourikis & Roumeliotis 2008, 201
     after an update at the pose predicted before it, F = [[1, 0, -(y' - y)], [0, 1, x' - x],
     [0, 0, 1]] with (x, y) the prior and (x', y') the predicted laser position: the
     shear by the update's position correction (``_cx``, ``_cy``) is applied once before the
-    next step (:meth:`predict_many`), and the heading column of a new landmark's Jacobian
+    next step (:meth:`_prediction_start`, for :meth:`predict_many` and
+    :meth:`predict_stretch`), and the heading column of a new landmark's Jacobian
     takes the same correction (:meth:`augment`). Gating, update and
     the innovation covariance use the same Jacobians; innovations use the current estimates.
     Why it matters, measured: with FEJ and no GPS, the heading's variance never falls below
@@ -162,8 +163,10 @@ class EkfSlam:
             self.predict_many(u, 0.0, (dt,), (u,), record=False)
 
     def predict_many(self, u, t: float, times, rows, *, record: bool = True):
-        """Advance over a stretch of odometry samples in one call (the run loop's step
-        between two scans or fixes): holding control ``u`` from time ``t``, for each sample
+        """Advance over a stretch of odometry samples in one call, step by step (the
+        reference :meth:`predict_stretch` is tested against, and :meth:`predict`'s one
+        step; the run loop applies stretches compounded beforehand, ``slam.stretches``):
+        holding control ``u`` from time ``t``, for each sample
         k predict to ``times[k]`` (steps of dt <= 0 skipped), then hold ``rows[k]``.
         ``u`` may be None (no control yet: nothing is predicted). Returns (u, t, n, poses):
         the control held and the time reached after the last sample, the number of steps

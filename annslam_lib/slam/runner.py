@@ -137,7 +137,11 @@ def run(dataset, config: SlamConfig | None = None, *, progress=None,
     with a terminal. backend: 'efficient' (:class:`EkfSlam`) or 'dense' (the textbook
     reference ``slam.dense.DenseEkfSlam``; slow, for checks). inspect: None, or a function
     called with the filter once it is built, before any step (an analysis may wrap its
-    methods to record what they see, e.g. ``evaluation.real_consistency``).
+    methods to record what they see, e.g. ``evaluation.real_consistency``). The loop calls
+    ``innovation_d2``, ``joint_prediction`` (JCBB), ``update``, ``augment``, ``remove``,
+    ``gps_update``, ``health`` and the read access on either backend; to predict,
+    ``predict_stretch`` on the efficient one (``slam.stretches``: the odometry between two
+    events compounded beforehand) and ``predict`` step by step on the dense one.
 
     Events are processed in time order from the first odometry sample on (earlier scans
     and fixes are skipped and counted); the filter predicts to every event's time with

@@ -1,37 +1,40 @@
 """The odometry between two events, compounded once for a whole run (notebook 06 "Victoria
-Park at scale"; the run loop, ``slam.runner``).
+Park at scale"; the run loop, ``slam.runner``, and the factor graph, ``smoothing.problem``).
 
 Between two events (a scan or a GPS fix) the filter only predicts: one Euler (or midpoint)
 step per odometry sample and a partial step to the event's time. None of those steps
 depends on the state except through the heading phi0 and the position p0 at the start of
 the stretch, and they enter as a rigid motion. The body-frame velocity of the laser is
-(v - w b, w a), so a step moves it by dt R(phi) (v - w b, w a) with phi = phi0 + Theta, and
-Theta, the heading turned since the start, depends on the controls only. Hence, in the
-frame of the stretch's start (phi0 = 0), computed once for every stretch of the run at
-once (arrays, no per-sample Python):
+(v - w b, w a), so a step moves it by dt R(phi) (v - w b, w a), where phi = phi0 + theta_k
+and theta_k depends on the controls only: the heading turned since the start (Euler), or
+that plus half the step's own turn (midpoint). Hence, in the frame of the stretch's start
+(phi0 = 0), computed once for every stretch of the run at once (arrays, no per-sample
+Python):
 
-    D = sum_k dt_k R(Theta_k) (v_k - w_k b, w_k a)      the laser's displacement
+    D = sum_k dt_k R(theta_k) (v_k - w_k b, w_k a)      the laser's displacement
     Theta = sum_k dt_k w_k                              the heading turned
     Q = sum_k G_k N_k G_k^T                             the process noise at the end
 
 with N_k the step's noise (``EkfSlam.predict_many``: dt_k Delta_k B Q_c B^T, B rotated
 like the velocity) and G_k = [[1, 0, s0], [0, 1, s1], [0, 0, 1]] the Jacobian of the steps
 after k, whose shear is the perpendicular of the displacement still to come, (s0, s1) =
-(-(D_y - D_{k,y}), D_x - D_{k,x}). The filter then applies a stretch with a dozen scalar
-operations (``EkfSlam.predict_stretch``): p += R(phi0) D, phi += Theta, and
+(-(D_y - D_{k,y}), D_x - D_{k,x}), D_k the displacement up to and including step k. The
+filter then applies a stretch with a dozen scalar operations (``EkfSlam.predict_stretch``):
+p += R(phi0) D, phi += Theta, and
 
     P_vv <- F P_vv F^T + R0 Q R0^T,    F = [[1, 0, -D'_y], [0, 1, D'_x], [0, 0, 1]],
 
 D' = R(phi0) D and R0 = diag(R(phi0), 1); the cross covariance gets the same F. This is
 the step-by-step prediction, rearranged; ``tests/test_stretches.py`` holds the two equal
 (to 1e-12) over events that split the odometry intervals, with both motion models, first
-estimates, zero steps and samples before the first event.
+estimates, zero steps, repeated sample times and samples before the first event.
 
 The steps follow the run loop's rules: from the first odometry sample on, each sample's
 control is held until the next sample or event time; a step of zero length is no step; an
-event before the first sample is skipped (the filter has no control yet) and gets an empty
-stretch. Stretch e ends at event e; stretch E (one past the last event) holds the samples
-after the last event.
+event that no odometry sample precedes (before the first sample, or a GPS fix at its very
+time: fixes count the samples strictly before them) is skipped, the filter having no
+control yet, and gets an empty stretch. Stretch e ends at event e; stretch E (one past the
+last event) holds the samples after the last event.
 """
 from __future__ import annotations
 
@@ -98,19 +101,30 @@ def _segment_cumsum(x: np.ndarray, first: np.ndarray, seg: np.ndarray) -> np.nda
 
 
 def compound(odo_t, controls, ev_t, ev_k, vehicle: Vehicle, midpoint: bool) -> Stretches:
-    """The stretches of a run (module docstring): odometry times ``odo_t`` (K,), increasing;
+    """The stretches of a run (module docstring): odometry times ``odo_t`` (K,), nondecreasing;
     ``controls`` (K, 9), the rows of ``models.motion.control_table``; the events' times
     ``ev_t`` (E,) in processing order and ``ev_k`` (E,), nondecreasing, the number of
-    samples before each (``runner._events``); ``midpoint`` for the midpoint model."""
-    odo_t = np.asarray(odo_t, dtype=float)
+    samples before each (``runner._events``); ``midpoint`` for the midpoint model.
+    Raises ValueError for inputs that do not fit together (lengths, order, non-finite
+    values, an ``ev_k`` that does not count the samples before its event)."""
+    odo_t = np.asarray(odo_t, dtype=float).ravel()
     ctrl = np.asarray(controls, dtype=float).reshape(-1, 9)
-    ev_t = np.asarray(ev_t, dtype=float)
-    ev_k = np.asarray(ev_k, dtype=np.int64)
+    ev_t = np.asarray(ev_t, dtype=float).ravel()
+    ev_k = np.asarray(ev_k, dtype=np.int64).ravel()
     K, E = odo_t.size, ev_t.size
     if ctrl.shape[0] != K or ev_k.size != E:
         raise ValueError("compound: odo_t and controls, ev_t and ev_k must have equal lengths")
+    if not (np.all(np.isfinite(odo_t)) and np.all(np.isfinite(ev_t))
+            and np.all(np.isfinite(ctrl))):
+        raise ValueError("compound: times and controls must be finite")
+    if np.any(np.diff(odo_t) < 0) or np.any(np.diff(ev_t) < 0):
+        raise ValueError("compound: odometry and event times must be nondecreasing")
     if E and (np.any(np.diff(ev_k) < 0) or ev_k[0] < 0 or ev_k[-1] > K):
         raise ValueError("compound: ev_k must be nondecreasing sample counts within 0..K")
+    before, after = ev_k >= 1, ev_k < K                  # each event between its samples
+    if np.any(odo_t[ev_k[before] - 1] > ev_t[before]) or np.any(odo_t[ev_k[after]] < ev_t[after]):
+        raise ValueError("compound: ev_k must count the odometry samples before each event "
+                         "(runner._events)")
     processed = ev_k >= 1
     pe = np.flatnonzero(processed)
     # The points, in processing order: sample k (key 2k) and processed event e right after
