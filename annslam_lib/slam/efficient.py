@@ -235,18 +235,10 @@ class EkfSlam:
         E = [[1, 0, e0], [0, 1, e1], [0, 0, 1]], (e0, e1) = (-cy, cx): E is applied here, to
         the copies returned; the caller clears (cx, cy) once it has taken a step (until
         then the correction waits)."""
-        p00, p01, p02, p11, p12, p22 = self._p
-        F0, F1 = self._f0, self._f1
         if self._cx or self._cy:
             e0, e1 = -self._cy, self._cx
-            p00, p01, p02, p11, p12 = (p00 + 2.0 * e0 * p02 + e0 * e0 * p22,
-                                       p01 + e0 * p12 + e1 * p02 + e0 * e1 * p22,
-                                       p02 + e0 * p22,
-                                       p11 + 2.0 * e1 * p12 + e1 * e1 * p22,
-                                       p12 + e1 * p22)
-            F0 += e0
-            F1 += e1
-        return p00, p01, p02, p11, p12, p22, F0, F1
+            return (*_sheared(self._p, e0, e1), self._f0 + e0, self._f1 + e1)
+        return (*self._p, self._f0, self._f1)
 
     def predict_stretch(self, row) -> int:
         """Advance over one stretch of odometry compounded beforehand (``slam.stretches``:
@@ -259,7 +251,7 @@ class EkfSlam:
         dx, dy, dth, q00, q01, q02, q11, q12, q22, steps = row
         if not steps:
             return 0
-        p00, p01, p02, p11, p12, p22, F0, F1 = self._prediction_start()
+        *p, F0, F1 = self._prediction_start()
         self._cx = self._cy = 0.0
         phi = self._pphi
         c, s = math.cos(phi), math.sin(phi)
@@ -270,12 +262,8 @@ class EkfSlam:
         r01 = cs * (q00 - q11) + (cc - ss) * q01
         r11 = ss * q00 + 2.0 * cs * q01 + cc * q11
         r02, r12 = c * q02 - s * q12, s * q02 + c * q12
-        self._p = [p00 + 2.0 * f0 * p02 + f0 * f0 * p22 + r00,
-                   p01 + f0 * p12 + f1 * p02 + f0 * f1 * p22 + r01,
-                   p02 + f0 * p22 + r02,
-                   p11 + 2.0 * f1 * p12 + f1 * f1 * p22 + r11,
-                   p12 + f1 * p22 + r12,
-                   p22 + q22]
+        p00, p01, p02, p11, p12, p22 = _sheared(p, f0, f1)
+        self._p = [p00 + r00, p01 + r01, p02 + r02, p11 + r11, p12 + r12, p22 + q22]
         self._px += wx
         self._py += wy
         phi += dth
@@ -654,6 +642,20 @@ class EkfSlam:
         lo = float(eigh(P, eigvals_only=True, subset_by_index=[0, 0], check_finite=False)[0])
         return lo, float(np.max(np.abs(P - P.T)))
 
+
+
+def _sheared(p, e0: float, e1: float) -> tuple:
+    """The six entries (00, 01, 02, 11, 12, 22) of E P E^T for the pose block P given by
+    ``p`` and the shear E = [[1, 0, e0], [0, 1, e1], [0, 0, 1]] (a compounded motion
+    Jacobian, or the FEJ correction). The per-sample loop of ``predict_many`` writes the
+    same products inline, with the step's noise folded in."""
+    p00, p01, p02, p11, p12, p22 = p
+    return (p00 + 2.0 * e0 * p02 + e0 * e0 * p22,
+            p01 + e0 * p12 + e1 * p02 + e0 * e1 * p22,
+            p02 + e0 * p22,
+            p11 + 2.0 * e1 * p12 + e1 * e1 * p22,
+            p12 + e1 * p22,
+            p22)
 
 
 def diag_blocks(P) -> np.ndarray:

@@ -42,6 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..models.geometry import wrap_angle
 from ..models.vehicle import Vehicle
 
 __all__ = ["Stretches", "compound"]
@@ -86,10 +87,8 @@ class Stretches:
         p0 = starts[self.sample_stretch]
         c, s = np.cos(p0[:, 2]), np.sin(p0[:, 2])
         dx, dy, dth = self.sample_rel.T
-        phi = p0[:, 2] + dth
-        phi = np.where((phi > -np.pi) & (phi <= np.pi), phi, np.pi - np.mod(np.pi - phi, 2 * np.pi))
         return np.column_stack([self.sample_t, p0[:, 0] + c * dx - s * dy,
-                                p0[:, 1] + s * dx + c * dy, phi])
+                                p0[:, 1] + s * dx + c * dy, wrap_angle(p0[:, 2] + dth)])
 
 
 def _segment_cumsum(x: np.ndarray, first: np.ndarray, seg: np.ndarray) -> np.ndarray:
@@ -125,7 +124,7 @@ def compound(odo_t, controls, ev_t, ev_k, vehicle: Vehicle, midpoint: bool) -> S
     if np.any(odo_t[ev_k[before] - 1] > ev_t[before]) or np.any(odo_t[ev_k[after]] < ev_t[after]):
         raise ValueError("compound: ev_k must count the odometry samples before each event "
                          "(runner._events)")
-    processed = ev_k >= 1
+    processed = before                                   # a sample precedes it: a control
     pe = np.flatnonzero(processed)
     # The points, in processing order: sample k (key 2k) and processed event e right after
     # its last preceding sample (key 2 ev_k[e] - 1); a stable sort keeps the events' order.
