@@ -30,7 +30,7 @@ def _pins(name: str = "environment.txt") -> dict[str, str]:
 def test_every_requirement_is_pinned_and_installed_at_that_version():
     pins = _pins()
     for required in ("jupyterlab", "ipywidgets", "numpy", "scipy", "matplotlib", "torch",
-                     "nbval", "pytest", "sympy", "gtsam"):
+                     "nbval", "pytest", "sympy", "gtsam", "numba"):
         assert required in pins, f"{required} missing from environment.txt"
     for name, version in pins.items():
         installed = metadata.version(name)

@@ -296,6 +296,9 @@ def test_the_sandbox_hides_the_instructor_notebook_and_has_no_network(instructor
              f"except OSError:\n    NET = False\n"
              f"assert not NET, 'network reachable'\n"
              f"import os\nassert os.environ.get('ANNSLAM_CACHE') == 'off', 'study cache on'\n"
+             f"from annslam_lib.slam import compiled\n"
+             f"assert compiled.gating_kernel() is None, 'compiled gating on'\n"
+             f"assert os.environ['NUMBA_CACHE_DIR'].startswith(os.environ['HOME']), 'numba cache'\n"
              + gs.OBSERVE_BODY)
     g = grade(gs.submission(probe, gs.SPEED_BODY), instructor, tmp_path, isolation="bwrap")
     server.close()

@@ -337,7 +337,7 @@ def test_the_student_environment_is_pinned_like_the_course_without_test_tools():
     assert student["jupyterhub"] == hubreq["jupyterhub"]
     assert student["nbgrader"] == _reqs("environment-instructor.txt")["nbgrader"]
     for pkg in ("jupyterlab", "ipykernel", "ipywidgets", "numpy", "scipy", "matplotlib",
-                'torch;sys_platform == "linux"'):
+                "numba", "llvmlite", 'torch;sys_platform == "linux"'):
         assert pkg in student, pkg
     assert "-e ." not in (ROOT / "environment-student.txt").read_text()
 

@@ -147,7 +147,7 @@ def test_setup_on_an_ordinary_machine_installs_the_cpu_build(cpu_index, tmp_path
     assert facts["cuda"] is None and facts["torch"] == TORCH_CPU
     assert facts["gpu_pkgs"] == []
     size = _size_gb(venv)
-    assert size < 1.8, f"venv is {size:.2f} GB"      # a CUDA build is 5 GB
+    assert size < 2.5, f"venv is {size:.2f} GB"      # a CUDA build is 5 GB
     stated = _readme_venv_gb()
     assert abs(size - stated) <= 0.1, f"README says a {stated} GB venv, measured {size:.2f} GB"
     print(f"fresh set-up: {seconds:.0f} s, venv {size:.2f} GB")

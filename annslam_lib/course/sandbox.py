@@ -290,7 +290,11 @@ class Sandbox:
                    IPYTHONDIR=str(self.home / ".ipython"), JUPYTER_RUNTIME_DIR=str(self.ipc),
                    PYTHONDONTWRITEBYTECODE="1", OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1",
                    MKL_NUM_THREADS="1", PYTHONHASHSEED="0", MPLBACKEND="agg",
-                   ANNSLAM_CACHE="off")       # a grade is computed, never read from a pickle
+                   ANNSLAM_CACHE="off",       # a grade is computed, never read from a pickle
+                   # nor run through machine code compiled and cached by another process:
+                   # the numpy gating (slam.compiled), numba's cache (if student code uses
+                   # numba) kept in the sandbox's own home
+                   ANNSLAM_KERNEL="numpy", NUMBA_CACHE_DIR=str(self.home / ".numba"))
         return env
 
     def start(self) -> None:

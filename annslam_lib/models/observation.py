@@ -15,7 +15,8 @@ Fast copies (change them together with :func:`observe`, :func:`_to_polar` and
 arithmetic without the Jacobians: bitwise the same values, for the landmark network at run
 time), :func:`observe_fast` (the filter's update), the innovation
 covariances of ``slam.efficient.EkfSlam.observation_model`` (closed form from the same
-Jacobians), and ``records.Laser.points`` (calls :func:`polar_to_laser`).
+Jacobians) and their compiled copy ``slam.compiled.gate_loop`` (long runs' gating), and
+``records.Laser.points`` (calls :func:`polar_to_laser`).
 ``tests/test_ekf_slam.py`` compares the filter with the dense reference, which calls
 :func:`observe` itself.
 """

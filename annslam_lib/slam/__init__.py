@@ -6,6 +6,7 @@
 - ``dense``: the textbook dense reference it is tested against, and the update's steps
 - ``runner``: ``run()``, the event loop, landmark book-keeping and result assembly
 - ``stretches``: the odometry between events, compounded once for a run
+- ``compiled``: the scan's gating as one numba-compiled loop, for long runs (Victoria Park)
 - ``results``: ``SlamResult`` and the per-detection log
 - ``dead_reckoning``: odometry alone, and the initial pose from GPS
 - ``threads``: single-threaded BLAS while a run goes
@@ -17,7 +18,7 @@ from __future__ import annotations
 from .._lazy import attach
 
 __getattr__, __dir__, __all__ = attach(
-    __name__, ["config", "base", "efficient", "dense", "runner", "stretches", "results",
+    __name__, ["config", "base", "efficient", "dense", "runner", "stretches", "compiled", "results",
                "dead_reckoning", "threads", "kalman", "localisation"],
     {"run": "runner", "SlamConfig": "config", "SlamResult": "results", "EkfSlam": "efficient",
      "DenseEkfSlam": "dense"})

@@ -67,7 +67,9 @@ First-estimates Jacobians (``fej=True``; Huang, Mourikis & Roumeliotis 2008, 201
 Models used here as fast, unchecked copies (each beside its model, with the list of places
 to change together): the Euler and midpoint step and its noise (``models.motion``,
 "fast copies"), the range-bearing prediction (``models.observation.observe_fast``), the
-angle wrap of differences (``models.geometry.wrap_difference``).
+angle wrap of differences (``models.geometry.wrap_difference``). The gating of
+:meth:`EkfSlam.innovation_d2` has a compiled copy, ``slam.compiled``, that long runs use
+(``gating='compiled'``, chosen by ``runner.run``); this numpy code stays the reference.
 """
 from __future__ import annotations
 
@@ -76,6 +78,7 @@ import math
 import numpy as np
 
 from .. import _checks
+from . import compiled
 from ..models.geometry import wrap_angle, wrap_difference
 from ..models.observation import inverse_observe, observe_fast
 from ..perception.association import mahalanobis
@@ -113,8 +116,17 @@ class EkfSlam:
     """
 
     def __init__(self, x0, P0, vehicle: Vehicle, motion_model: str = "euler", *,
-                 fej: bool = False) -> None:
+                 fej: bool = False, gating: str = "numpy") -> None:
         x0, P0 = check_initial(x0, P0, vehicle, motion_model)
+        if gating not in ("numpy", "compiled"):
+            raise ValueError(f"EkfSlam gating must be 'numpy' or 'compiled', got {gating!r}")
+        self._gate = None                  # slam.compiled's loop, for gating='compiled'
+        if gating == "compiled":
+            self._gate = compiled.gating_kernel()
+            if self._gate is None:
+                raise RuntimeError("EkfSlam gating='compiled': the compiled gating is not "
+                                   f"available ({compiled.unavailable_reason()})")
+        self.gating = gating
         _load_linalg()
         self._mid = motion_model == "midpoint"
         self.fej = _checks.flag("EkfSlam fej", fej)
@@ -393,8 +405,18 @@ class EkfSlam:
         check_sigmas("innovation_d2", sigma_range, sigma_bearing)
         z = check_z("innovation_d2", z)
         self.flush()
-        if self.n_landmarks == 0:
+        N = self.n_landmarks
+        if N == 0:
             return np.empty((z.shape[0], 0))
+        if self._gate is not None:                         # the same, as one compiled loop
+            J, d2 = np.empty((5, N)), np.empty((z.shape[0], N))
+            if not self._gate(self.x[3:].reshape(N, 2), self.P, self._px, self._py, self._pphi,
+                              *self._p, self._first, self.fej, np.ascontiguousarray(z),
+                              sigma_range**2, sigma_bearing**2, J, d2):
+                self._om = [self._px, self._py, self._pphi, N, J]
+                return d2
+            # a problem (NaN, a coincident landmark, S not positive definite): the numpy
+            # code below finds it again and raises its own error, naming it
         r, bearing, a, b, c = self._model(sigma_range, sigma_bearing)
         det = a * c - b * b
         if not (det.min() > 0.0 and a.min() > 0.0):        # NaN fails too

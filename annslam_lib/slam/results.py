@@ -68,6 +68,7 @@ class SlamResult:
     state, covariance: final x and P. observations: :class:`ObservationLog`.
     runtime: seconds of the whole call (features included); config, initial_pose (3,)
     at the first odometry time, initial_info (policy, and the GPS fit's numbers).
+    gating: 'numpy' or 'compiled', how the efficient filter gated (``run``'s gating).
     """
 
     trajectory: np.ndarray
@@ -88,6 +89,7 @@ class SlamResult:
     config: SlamConfig
     initial_pose: np.ndarray
     initial_info: dict = field(default_factory=dict)
+    gating: str = "numpy"
 
     def summary(self) -> str:
         c = self.counts

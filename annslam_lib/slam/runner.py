@@ -52,7 +52,7 @@ from ..perception.association import NEW, REJECTED, associate_fast
 from ..perception.jcbb import _search_checked
 from .base import FilterBackend, LandmarkModel
 from .config import SlamConfig
-from . import stretches
+from . import compiled, stretches
 from .results import STATUS, ObservationLog, SlamResult, _landmark_history, _nis_arrays
 from .efficient import diag_blocks
 from .threads import one_blas_thread
@@ -128,7 +128,8 @@ def _progress(progress, total):
 
 
 def run(dataset, config: SlamConfig | None = None, *, progress=None,
-        backend: str = "efficient", landmark_model=None, inspect=None) -> SlamResult:
+        backend: str = "efficient", landmark_model=None, inspect=None,
+        gating: str = "auto") -> SlamResult:
     """Run EKF-SLAM over a whole dataset (notebook 05; notebook 06 for Victoria Park).
 
     dataset: a ``records.Dataset`` (loaded or simulated) or 'car_park' / 'victoria_park'.
@@ -142,6 +143,11 @@ def run(dataset, config: SlamConfig | None = None, *, progress=None,
     ``gps_update``, ``health`` and the read access on either backend; to predict,
     ``predict_stretch`` on the efficient one (``slam.stretches``: the odometry between two
     events compounded beforehand) and ``predict`` step by step on the dense one.
+    gating (efficient backend): 'numpy' (``EkfSlam.innovation_d2`` as chapter 05 derives
+    it), 'compiled' (the same formulas as one compiled loop, ``slam.compiled``; an error
+    if numba is missing) or 'auto' (compiled for runs of at least
+    ``slam.compiled.MIN_SCANS`` scans when available, else numpy); ``result.gating`` says
+    which ran.
 
     Events are processed in time order from the first odometry sample on (earlier scans
     and fixes are skipped and counted); the filter predicts to every event's time with
@@ -156,8 +162,10 @@ def run(dataset, config: SlamConfig | None = None, *, progress=None,
     (module docstring). The log keeps the detections, not the pseudo-measurements (after the
     configuration's calibration, ``SlamConfig.range_bias`` and ``bearing_offset``, if any).
     """
+    if gating not in ("auto", "numpy", "compiled"):
+        raise ValueError(f"gating must be 'auto', 'numpy' or 'compiled', got {gating!r}")
     with one_blas_thread():
-        return _run(dataset, config, progress, backend, landmark_model, inspect)
+        return _run(dataset, config, progress, backend, landmark_model, inspect, gating)
 
 
 @memoize
@@ -374,7 +382,8 @@ class _ScanStep:
         return assign.tolist()
 
 
-def _run(dataset, config, progress, backend, landmark_model=None, inspect=None) -> SlamResult:
+def _run(dataset, config, progress, backend, landmark_model=None, inspect=None,
+         gating="auto") -> SlamResult:
     t_start = time.perf_counter()
     ds, screening = screen(_resolve_dataset(dataset))     # damaged streams: repaired, counted
     if config is None:
@@ -406,8 +415,14 @@ def _run(dataset, config, progress, backend, landmark_model=None, inspect=None) 
     if cfg.first_estimates and backend != "efficient":
         raise ValueError("SlamConfig.first_estimates (FEJ) is implemented by the efficient "
                          "backend only")
-    filt = (make(pose0, P0, ds.vehicle, cfg.motion_model, fej=True) if cfg.first_estimates
-            else make(pose0, P0, ds.vehicle, cfg.motion_model))
+    options = {"fej": True} if cfg.first_estimates else {}
+    if backend == "efficient":
+        if gating == "auto":
+            gating = "compiled" if compiled.use_compiled(len(det)) else "numpy"
+        options["gating"] = gating
+    elif gating == "compiled":
+        raise ValueError("gating='compiled' is a choice of the efficient backend only")
+    filt = make(pose0, P0, ds.vehicle, cfg.motion_model, **options)
     book = LandmarkBook(cfg.landmark_min_observations, cfg.landmark_probation)
     if cfg.map_mode == "known":                # EKF localisation on the surveyed map
         if ds.beacons is None:
@@ -551,4 +566,4 @@ def _assemble(filt, book, dets, cfg, counts, traj_rows, cov_rows, scans_done, po
         landmark_observations=lm_obs, landmark_true_id=lm_true, nis=_nis_arrays(nis_rows),
         counts=counts, health=health, state=x, covariance=P, observations=log,
         runtime=time.perf_counter() - t_start, config=cfg, initial_pose=pose0,
-        initial_info=init_info)
+        initial_info=init_info, gating=getattr(filt, "gating", "numpy"))
