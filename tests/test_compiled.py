@@ -64,6 +64,12 @@ def _detections(f, seed, n=12):
 def test_compiled_gating_equals_the_numpy_gating(seed, fej):
     a, b = _pair(seed, 5 + 40 * seed, fej)
     z = _detections(a, seed)
+    # the loop itself finds the state good (else innovation_d2 would hand it to numpy)
+    b.flush()
+    N = b.n_landmarks
+    J, d2 = np.empty((5, N)), np.empty((len(z), N))
+    assert compiled.gating_kernel()(b.x[3:].reshape(N, 2), b.P, b._px, b._py, b._pphi, *b._p,
+                                    b._first, fej, z, SR**2, SB**2, J, d2) == compiled.OK
     d_np = a.innovation_d2(z, SR, SB)
     d_c = b.innovation_d2(z, SR, SB)
     assert d_c.shape == d_np.shape == (len(z), a.n_landmarks)
@@ -112,6 +118,8 @@ BAD_STATES = {
     "NaN landmark": (lambda f: f.x.__setitem__(3, np.nan), "NaN"),
     "landmark on the sensor": (lambda f: f.x.__setitem__(slice(3, 5), f.x[:2]), "coincides"),
     "S not positive definite": (lambda f: f.P.__setitem__((3, 3), -50.0), "not positive definite"),
+    "S negative definite": (lambda f: (f.P.__setitem__((3, 3), -50.0), f.P.__setitem__((4, 4), -50.0)),
+                            "not positive definite"),
     "NaN covariance": (lambda f: f.P.__setitem__((4, 4), np.nan), "NaN"),
 }
 
@@ -143,6 +151,17 @@ def test_a_first_estimate_on_the_sensor_raises_the_same_error():
     assert errors[0] == errors[1]
 
 
+def test_a_disagreement_between_the_two_codes_is_an_error_not_a_silent_fallback(monkeypatch):
+    f = EkfSlam([0.0, 0.0, 0.0], np.diag([0.01, 0.01, 1e-3]), ACFR_UTE, gating="compiled")
+    f.augment([[5.0, 1.0]], SR, SB)
+    monkeypatch.setattr(f, "_gate", lambda *a: compiled.BAD_S)      # a broken loop
+    with pytest.raises(RuntimeError, match="compiled gating reported problem 3"):
+        f.innovation_d2([[5.0, 1.0]], SR, SB)
+    f._first = f._first[:0]                                          # arrays out of step
+    with pytest.raises(RuntimeError, match="do not fit together"):
+        f.innovation_d2([[5.0, 1.0]], SR, SB)
+
+
 def test_switching_it_off_and_bad_choices(monkeypatch):
     with pytest.raises(ValueError, match="gating must be 'numpy' or 'compiled'"):
         EkfSlam([0.0, 0.0, 0.0], np.eye(3), ACFR_UTE, gating="fast")
@@ -154,6 +173,30 @@ def test_switching_it_off_and_bad_choices(monkeypatch):
     monkeypatch.setenv("ANNSLAM_KERNEL", "numpy")
     assert compiled.gating_kernel() is None and not compiled.use_compiled(10**6)
     with pytest.raises(RuntimeError, match="ANNSLAM_KERNEL=numpy"):
+        EkfSlam([0.0, 0.0, 0.0], np.eye(3), ACFR_UTE, gating="compiled")
+    monkeypatch.setenv("ANNSLAM_KERNEL", "off")                      # a typo is not 'on'
+    with pytest.raises(ValueError, match="ANNSLAM_KERNEL must be 'numpy'"):
+        compiled.use_compiled(10**6)
+    monkeypatch.setenv("ANNSLAM_KERNEL", "auto")
+    assert compiled.gating_kernel() is not None
+
+
+def test_a_numba_that_cannot_load_leaves_the_numpy_gating(monkeypatch):
+    """numba missing, or its LLVM library failing to load (an OSError, not an ImportError):
+    long runs gate with numpy, and asking for the compiled loop names the reason."""
+    import builtins
+    real_import = builtins.__import__
+
+    def broken(name, *args, **kwargs):
+        if name == "numba" or name.startswith("numba."):
+            raise OSError("libllvmlite.so: cannot open shared object file")
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(compiled, "_kernel", None)
+    monkeypatch.setattr(compiled, "_failed", None)
+    monkeypatch.setattr(builtins, "__import__", broken)
+    assert compiled.gating_kernel() is None and not compiled.use_compiled(10**6)
+    with pytest.raises(RuntimeError, match="numba cannot be imported.*libllvmlite"):
         EkfSlam([0.0, 0.0, 0.0], np.eye(3), ACFR_UTE, gating="compiled")
 
 
@@ -169,7 +212,9 @@ def test_without_a_writable_cache_it_compiles_in_memory(monkeypatch):
     monkeypatch.setattr(compiled, "_kernel", None)
     monkeypatch.setattr(compiled, "_failed", None)
     monkeypatch.setattr(compiled, "_compiled", fake)
-    assert compiled.gating_kernel() == "in memory" and built == [True, False]
+    with pytest.warns(RuntimeWarning, match="not cached on disk.*no locator"):
+        assert compiled.gating_kernel() == "in memory"
+    assert built == [True, False]
 
 
 def test_a_fresh_process_compiles_caches_and_loads_it(tmp_path):

@@ -259,6 +259,36 @@ WRITE = (
     "p.write_text(p.read_text() + '\\ncheck_observe = lambda *a, **k: None\\n')\n")
 
 
+PLANT = (
+    "import pathlib\n"
+    "d = pathlib.Path({folder!r})\n"
+    "d.mkdir(exist_ok=True)\n"
+    "(d / 'compiled.gate_loop-43.py311.nbi').write_bytes(b'planted index')\n"
+    "(d / 'compiled.gate_loop-43.py311.1.nbc').write_bytes(b'planted code')\n")
+
+
+def test_a_planted_numba_cache_is_deleted_after_the_submission(instructor, tmp_path,
+                                                              course_files):
+    """Without a sandbox (isolation 'none') a submission can write next to the library; numba
+    would unpickle a cache file planted there in the instructor's next long run
+    (slam.compiled). New or changed cache files are deleted after the submission; one
+    that was there before and did not change stays."""
+    cache = ROOT / "annslam_lib" / "slam" / "__pycache__"
+    cache.mkdir(exist_ok=True)
+    kept = cache / "compiled.kept_by_the_instructor.nbi"
+    kept.write_bytes(b"the instructor's own")
+    try:
+        attack = PLANT.format(folder=str(cache)) + gs.OBSERVE_BODY
+        g = grade(gs.submission(attack, gs.SPEED_BODY), instructor, tmp_path, isolation="none")
+        assert g.score == FULL, g.report()               # not held against the student
+        assert not list(cache.glob("compiled.gate_loop-43.py311*")), "a planted file is left"
+        assert kept.read_bytes() == b"the instructor's own"
+    finally:
+        kept.unlink(missing_ok=True)
+        for p in cache.glob("compiled.gate_loop-43.py311*"):
+            p.unlink()
+
+
 @pytest.mark.parametrize("isolation", ["bwrap", "nobody", "none"])
 def test_writing_to_the_course_library_changes_nothing_for_the_next_student(
         isolation, instructor, tmp_path, course_files):

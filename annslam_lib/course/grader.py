@@ -481,6 +481,32 @@ def _fingerprint(folders) -> dict[str, str]:
     return out
 
 
+# numba's on-disk cache (slam.compiled), in __pycache__ next to the module: an index numba
+# unpickles and machine code it runs, so a planted file runs code in the next long run of
+# whoever uses that library. __pycache__ is not guarded above (any process that imports the
+# library rewrites Python's bytecode there), and a legitimate process of the instructor may
+# write this cache while a submission runs, so a new or changed cache file is not held
+# against the student: it is deleted after the submission (numba compiles again, 0.3 s).
+_COMPILED_CACHE = ("*.nbi", "*.nbc")
+
+
+def _compiled_cache(folders) -> dict[str, str]:
+    out = {}
+    for folder in folders:
+        for pattern in _COMPILED_CACHE:
+            for p in Path(folder).rglob(pattern):
+                with contextlib.suppress(OSError):
+                    out[str(p)] = hashlib.sha256(p.read_bytes()).hexdigest()
+    return out
+
+
+def _drop_new_compiled_cache(before: dict[str, str], folders) -> None:
+    for path, digest in _compiled_cache(folders).items():
+        if before.get(path) != digest:
+            with contextlib.suppress(OSError):
+                os.unlink(path)
+
+
 def _snapshot(folders) -> dict[str, bytes]:
     out = {}
     for folder in folders:
@@ -553,6 +579,7 @@ def grade_submission(path, instructor, *, limits: Limits = Limits(), isolation: 
     g.solution_sources = _solution_sources(gplan, tests, solutions)
     guard = [Path(p) for p in (guard or [])]
     backup = _snapshot(guard) if guard else {}
+    compiled_before = _compiled_cache(guard)
     try:
         with Sandbox(limits, isolation=isolation, hide=hide) as sb:
             g.isolation = sb.isolation
@@ -581,6 +608,7 @@ def grade_submission(path, instructor, *, limits: Limits = Limits(), isolation: 
     except Exception as e:               # the grader's own trouble: say so, never a score
         g.graded, g.reason = False, f"grading failed: {type(e).__name__}: {e}"
     finally:
+        _drop_new_compiled_cache(compiled_before, guard)
         if guard:
             changed = _restore(backup, guard)
             if changed:

@@ -14,23 +14,29 @@ teach; this loop is a fast copy of it, listed with the other copies in
 Why a compiled loop: the numpy gating does about fifty vector operations per scan over a
 few hundred landmarks, each costing its call overhead (about a microsecond) more than its
 arithmetic: on Victoria Park (7248 scans, 335 landmarks) about a quarter of the run. One
-compiled loop does the same arithmetic in one call. Measured (2-core Xeon, one thread):
-the loop saves about 65 us a scan on Victoria Park and 45 us on the Car Park (15
-landmarks), while a process pays about 0.3 s CPU once to import numba (0.14 s) and load the
-cached machine code (0.15 s), about 0.3 s more the first time on a machine (compiling it).
-Break-even is thus near 5000 scans: :func:`use_compiled` switches the loop on for runs at
-least :data:`MIN_SCANS` long (Victoria Park; not the Car Park's 586 scans nor the simulator's
-runs), so that a chapter that never runs such a run never imports numba.
+compiled loop does the same arithmetic in one call. Measured (2-core Xeon, one thread, two
+sessions): the loop saves 55-65 us a scan on Victoria Park (up to 335 landmarks) and about
+35-45 us on the Car Park (15), while a process pays about 0.27 s CPU once to import numba
+(0.12-0.14 s) and load the cached machine code (0.14-0.15 s), about 0.3 s more the first
+time on a machine (compiling it). Break-even is thus near 5000 scans of a Victoria Park-sized
+map (more for smaller maps: the saving grows with the landmarks): :func:`use_compiled`
+switches the loop on for runs at least :data:`MIN_SCANS` long (Victoria Park; not the Car
+Park's 586 scans nor the simulator's runs), so that a chapter without such a run never
+imports numba.
 
 ``ANNSLAM_KERNEL=numpy`` in the environment switches it off everywhere (the grader's sandbox
-does: it runs student code, which must not share a cache of compiled code with the course).
+does: it runs student code, which must not share a cache of compiled code with the course;
+``course.grader`` also deletes any numba cache file that appears in the course's folders
+while a submission runs); ``ANNSLAM_KERNEL=auto`` or unset leaves it on.
 """
 from __future__ import annotations
 
 import math
 import os
+import threading
+import warnings
 
-__all__ = ["gate_loop", "gating_kernel", "use_compiled", "MIN_SCANS"]
+__all__ = ["gate_loop", "gating_kernel", "use_compiled", "unavailable_reason", "MIN_SCANS"]
 
 # A run with fewer scans than this keeps the numpy gating (measured break-even: module
 # docstring; benchmarks/bench_ekf_slam.py prints the figures).
@@ -121,32 +127,49 @@ def gate_loop(lm, P, px, py, pphi, p00, p01, p02, p11, p12, p22, first, fej,
 
 _kernel = None          # the compiled gate_loop, once built
 _failed = None          # why it could not be built (str), once tried
+_lock = threading.Lock()
+
+
+def _switched_off() -> bool:
+    """``ANNSLAM_KERNEL``: 'numpy' switches the compiled loop off, 'auto' or unset leaves it;
+    anything else is refused (a typo must not leave it silently on)."""
+    value = os.environ.get("ANNSLAM_KERNEL", "").strip().lower()
+    if value not in ("", "auto", "numpy"):
+        raise ValueError(f"ANNSLAM_KERNEL must be 'numpy' (the numpy gating only) or 'auto' "
+                         f"(or unset), got {os.environ['ANNSLAM_KERNEL']!r}")
+    return value == "numpy"
 
 
 def gating_kernel():
-    """The compiled :func:`gate_loop`, or None when numba is not installed, cannot compile
-    here, or ``ANNSLAM_KERNEL=numpy``. Built once per process, on first use; its machine
-    code is cached on disk by numba (next to this file, else in the user's cache folder)
-    and loaded from there by the next process, or compiled in memory only where no cache
-    folder is writable."""
+    """The compiled :func:`gate_loop`, or None when numba is not installed or cannot be
+    loaded, cannot compile here, or ``ANNSLAM_KERNEL=numpy``. Built once per process, on
+    first use; numba caches its machine code on disk (next to this file, else in the user's
+    cache folder, or in ``NUMBA_CACHE_DIR``) and the next process loads it from there; where
+    that fails (no writable folder, a damaged cache file) it is compiled in memory, with a
+    warning that says why."""
     global _kernel, _failed
-    if os.environ.get("ANNSLAM_KERNEL", "").strip().lower() == "numpy":
+    if _switched_off():
         return None
-    if _kernel is not None or _failed is not None:
-        return _kernel
-    try:
-        import numba
-    except ImportError as exc:
-        _failed = f"numba is not installed ({exc})"
-        return None
-    try:
-        _kernel = _compiled(numba, cache=True)
-    except Exception:                      # no writable cache folder: compile in memory
+    with _lock:
+        if _kernel is not None or _failed is not None:
+            return _kernel
         try:
-            _kernel = _compiled(numba, cache=False)
-        except Exception as exc:           # pragma: no cover - numba broken on this machine
-            _failed = f"numba could not compile the gating ({type(exc).__name__}: {exc})"
-    return _kernel
+            import numba
+        except Exception as exc:           # not installed, or its LLVM library fails to load
+            _failed = f"numba cannot be imported ({type(exc).__name__}: {exc})"
+            return None
+        try:
+            _kernel = _compiled(numba, cache=True)
+        except Exception as exc:
+            warnings.warn(f"annslam: the compiled gating is not cached on disk ({type(exc).__name__}: "
+                          f"{exc}); compiling it in memory for this process", RuntimeWarning,
+                          stacklevel=2)
+            try:
+                _kernel = _compiled(numba, cache=False)
+            except Exception as exc2:      # pragma: no cover - numba broken on this machine
+                _failed = (f"numba could not compile the gating ({type(exc2).__name__}: "
+                           f"{exc2})")
+        return _kernel
 
 
 def _compiled(numba, cache: bool):
@@ -171,6 +194,6 @@ def use_compiled(n_scans: int) -> bool:
 
 def unavailable_reason() -> str | None:
     """Why :func:`gating_kernel` returned None (after it was asked), else None."""
-    if os.environ.get("ANNSLAM_KERNEL", "").strip().lower() == "numpy":
+    if _switched_off():
         return "ANNSLAM_KERNEL=numpy"
     return _failed

@@ -107,7 +107,10 @@ class EkfSlam:
     """The efficient EKF-SLAM state (x, P) and its operations (module docstring).
 
     x0 (3,): initial laser pose; P0 (3, 3): its covariance (symmetric, PSD, finite);
-    motion_model: 'euler' or 'midpoint' (:class:`SlamConfig`).
+    motion_model: 'euler' or 'midpoint' (:class:`SlamConfig`); fej: first-estimates
+    Jacobians (module docstring); gating: 'numpy' (:meth:`innovation_d2` as derived) or
+    'compiled' (the same as one numba-compiled loop, ``slam.compiled``: what
+    ``runner.run`` chooses for long runs; a RuntimeError if it is not available).
     ``slam.dense.DenseEkfSlam`` has the same interface with textbook dense algebra.
     Read the state through :meth:`state` (or ``pose``, ``pose_cov``,
     :meth:`landmark_covs`): between calls the vehicle block lives in Python floats, the
@@ -401,18 +404,26 @@ class EkfSlam:
         landmark's predicted measurement: :meth:`observation_model` followed by
         ``perception.association.mahalanobis_fast`` (the same formulas, equal to rounding),
         in one pass without building zhat and S (the scan's gating is its costliest step
-        after the update)."""
+        after the update). With ``gating='compiled'`` the same formulas run as one compiled
+        loop (``slam.compiled.gate_loop``); a state it finds bad is handed to this code,
+        which raises its own error."""
         check_sigmas("innovation_d2", sigma_range, sigma_bearing)
         z = check_z("innovation_d2", z)
         self.flush()
         N = self.n_landmarks
         if N == 0:
             return np.empty((z.shape[0], 0))
+        status = 0
         if self._gate is not None:                         # the same, as one compiled loop
+            if self._first.shape != (N, 2) or not self.P.flags.c_contiguous:
+                raise RuntimeError("EkfSlam: the state's arrays do not fit together "
+                                   f"({N} landmarks, {self._first.shape[0]} first estimates)")
             J, d2 = np.empty((5, N)), np.empty((z.shape[0], N))
-            if not self._gate(self.x[3:].reshape(N, 2), self.P, self._px, self._py, self._pphi,
-                              *self._p, self._first, self.fej, np.ascontiguousarray(z),
-                              sigma_range**2, sigma_bearing**2, J, d2):
+            status = self._gate(self.x[3:].reshape(N, 2), self.P, self._px, self._py,
+                                self._pphi, *self._p, self._first, self.fej,
+                                np.ascontiguousarray(z), float(sigma_range**2),
+                                float(sigma_bearing**2), J, d2)
+            if not status:
                 self._om = [self._px, self._py, self._pphi, N, J]
                 return d2
             # a problem (NaN, a coincident landmark, S not positive definite): the numpy
@@ -422,6 +433,10 @@ class EkfSlam:
         if not (det.min() > 0.0 and a.min() > 0.0):        # NaN fails too
             S = np.stack([np.stack([a, b], -1), np.stack([b, c], -1)], -2)
             mahalanobis(z, np.column_stack([r, bearing]), S)    # raises, naming the landmark
+        if status:                                         # the two codes disagree
+            raise RuntimeError(f"EkfSlam: the compiled gating reported problem {status} "
+                               "(slam.compiled) where the numpy gating finds none; "
+                               "ANNSLAM_KERNEL=numpy avoids the compiled loop")
         idet = 1.0 / det
         nu_r = z[:, 0, None] - r
         nu_b = wrap_difference(z[:, 1, None] - bearing)
