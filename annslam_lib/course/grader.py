@@ -487,16 +487,12 @@ def _fingerprint(folders) -> dict[str, str]:
 # library rewrites Python's bytecode there), and a legitimate process of the instructor may
 # write this cache while a submission runs, so a new or changed cache file is not held
 # against the student: it is deleted after the submission (numba compiles again, 0.3 s).
-_COMPILED_CACHE = ("*.nbi", "*.nbc")
-
-
 def _compiled_cache(folders) -> dict[str, str]:
     out = {}
     for folder in folders:
-        for pattern in _COMPILED_CACHE:
-            for p in Path(folder).rglob(pattern):
-                with contextlib.suppress(OSError):
-                    out[str(p)] = hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in Path(folder).rglob("*.nb[ic]"):          # numba's index and code files
+            with contextlib.suppress(OSError):
+                out[str(p)] = hashlib.sha256(p.read_bytes()).hexdigest()
     return out
 
 

@@ -143,8 +143,8 @@ def _switched_off() -> bool:
 def gating_kernel():
     """The compiled :func:`gate_loop`, or None when numba is not installed or cannot be
     loaded, cannot compile here, or ``ANNSLAM_KERNEL=numpy``. Built once per process, on
-    first use; numba caches its machine code on disk (next to this file, else in the user's
-    cache folder, or in ``NUMBA_CACHE_DIR``) and the next process loads it from there; where
+    first use; numba caches its machine code on disk (in ``NUMBA_CACHE_DIR`` if set, else
+    next to this file, else in the user's cache folder) and the next process loads it; where
     that fails (no writable folder, a damaged cache file) it is compiled in memory, with a
     warning that says why."""
     global _kernel, _failed
