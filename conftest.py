@@ -53,6 +53,7 @@ def _pngs(outputs) -> list[str]:
 
 def pytest_configure(config):
     _own_study_cache(config)
+    _compile_library(config)
     try:
         from nbval.plugin import IPyNbCell
     except ImportError:            # nbval not installed: nothing to extend
@@ -138,6 +139,22 @@ def pytest_xdist_make_scheduler(config, log):
             return nodeid if path in SPLIT else path
 
     return CourseScheduling(config, log)
+
+
+def _compile_library(config) -> None:
+    """The library's bytecode, written once before the workers start: the grader watches
+    every file of the library, ``__pycache__`` included, while it grades (a change stops
+    it), so no test process may be the first to write one meanwhile."""
+    if hasattr(config, "workerinput"):
+        return
+    import compileall
+    import sys
+
+    prefix, sys.pycache_prefix = sys.pycache_prefix, None
+    try:
+        compileall.compile_dir(os.path.join(os.path.dirname(__file__), "annslam_lib"), quiet=2)
+    finally:
+        sys.pycache_prefix = prefix
 
 
 def _own_study_cache(config) -> None:

@@ -49,6 +49,13 @@ setup() {  # setup [extra requirement files...]
     echo "== set-up done in $((SECONDS - t0)) s"
 }
 
+# The grader's own bytecode, from its first import on, in a folder of this user's that no
+# submission can write: never the __pycache__ next to the library's sources.
+grader_bytecode() {
+    local d="${XDG_CACHE_HOME:-$HOME/.cache}/annslam/grader-bytecode"
+    mkdir -p "$d" && chmod 700 "$d" && export PYTHONPYCACHEPREFIX="$d"
+}
+
 lab() {
     local root instructor=0 args=()
     for a in "$@"; do
@@ -98,6 +105,7 @@ case "$cmd" in
         ;;
     grade)
         setup
+        grader_bytecode
         "$VPY" -m annslam_lib grade "$@"
         ;;
     hub)
@@ -106,6 +114,7 @@ case "$cmd" in
         ;;
     class)
         setup environment-hub.txt
+        grader_bytecode
         exec "$VPY" -m annslam_lib class "$@"
         ;;
     *)

@@ -47,3 +47,44 @@ def _library_answers_allowed(request):
             yield
     else:
         yield
+
+
+# ----------------------------------------------------------------- the grader's sandbox
+def _sandbox_problem() -> str:
+    from annslam_lib.course import sandbox
+
+    return sandbox.bwrap_problem()
+
+
+def pytest_report_header(config):
+    why = _sandbox_problem()
+    if why:
+        return [f"grading sandbox: not available ({why}); the grading machinery's tests run "
+                "with isolation 'none', the sandbox's own tests are skipped"]
+    return ["grading sandbox: bubblewrap"]
+
+
+@pytest.fixture(autouse=True)
+def _unsandboxed_where_no_sandbox(request, monkeypatch):
+    """Where bubblewrap cannot make the grader's sandbox (a laptop without it), the tests of
+    the grading machinery (plans, checks, scores, reports) still run, explicitly without a
+    sandbox; the tests of the sandbox itself skip, saying why (``needs_sandbox``)."""
+    why = _sandbox_problem()
+    if not why:
+        yield
+        return
+    if request.node.get_closest_marker("needs_sandbox"):
+        pytest.skip(f"the grader's sandbox cannot be made here: {why}")
+    from annslam_lib.course import sandbox
+
+    init = sandbox.Sandbox.__init__
+
+    def unsandboxed(self, limits=sandbox.Limits(), *, isolation="auto", hide=()):
+        init(self, limits, isolation="none" if isolation == "auto" else isolation, hide=hide)
+    monkeypatch.setattr(sandbox.Sandbox, "__init__", unsandboxed)
+    yield
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "needs_sandbox: the test runs the grader's real "
+                            "sandbox (bubblewrap), in this process or a subprocess")

@@ -16,6 +16,10 @@ def prepared_layout() -> hub.HubLayout:
     """The hub folder ``./course.sh test`` prepared (skip, saying why, where it cannot be)."""
     if os.geteuid() != 0:
         pytest.skip("the class hub gives students Unix accounts: needs root")
+    from annslam_lib.course import sandbox
+
+    if sandbox.bwrap_problem():          # the hub refuses to start where grading would
+        pytest.skip(f"the grader's sandbox cannot be made here: {sandbox.bwrap_problem()}")
     layout = hub.HubLayout(HUB_DIR)
     if not (layout.root / hub_setup.PREPARED).exists():
         pytest.skip(f"the class hub's folder {layout.root} is not prepared (./course.sh test "

@@ -20,7 +20,8 @@ import pytest
 
 
 from annslam_lib.course.grader import grade_batch, grade_submission
-from annslam_lib.course.sandbox import Limits, bwrap_available, nobody_available
+from annslam_lib.course.grader import GradingEnvironmentError
+from annslam_lib.course.sandbox import Limits, bwrap_available
 from annslam_lib.data import fetch
 
 import grading_support as gs
@@ -29,7 +30,8 @@ ROOT = Path(__file__).resolve().parents[1]
 LIMITS = Limits(cell_timeout=4.0, call_timeout=4.0, deadline=45.0)
 # The sandbox these run in: 'auto' (bubblewrap where it works); ANNSLAM_TEST_ISOLATION=none
 # replays them without one, as on a machine without bubblewrap.
-ISOLATION = os.environ.get("ANNSLAM_TEST_ISOLATION", "auto")
+ISOLATION = os.environ.get("ANNSLAM_TEST_ISOLATION",
+                           "auto" if bwrap_available() is not None else "none")
 FULL = sum(gs.POINTS.values())
 GUARDED = [ROOT / "annslam_lib", ROOT / "notebooks"]
 
@@ -58,7 +60,8 @@ def course_files():
     assert _fingerprint() == before, "a submission changed a course file"
 
 
-def grade(nb, instructor, tmp_path, *, name="chapter.ipynb", limits=LIMITS, isolation=ISOLATION):
+def grade(nb, instructor, tmp_path, *, name="chapter.ipynb", limits=LIMITS, isolation=ISOLATION,
+          guard=GUARDED):
     path = tmp_path / "submitted" / "student" / "chapter" / name
     if isinstance(nb, bytes):
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -67,7 +70,7 @@ def grade(nb, instructor, tmp_path, *, name="chapter.ipynb", limits=LIMITS, isol
         gs.write(nb, path)
     t0 = time.monotonic()
     g = grade_submission(path, instructor, limits=limits, isolation=isolation,
-                         hide=[instructor.parent], guard=GUARDED)
+                         hide=[instructor.parent], guard=guard)
     g.wall = time.monotonic() - t0
     assert g.wall <= limits.deadline + 15, f"grading took {g.wall:.0f} s"
     return g
@@ -161,6 +164,27 @@ def test_cpu_and_memory_limits(instructor, tmp_path, course_files):
     g = grade(gs.submission(hog, gs.SPEED_BODY), instructor, tmp_path / "m")
     assert by_id(g)["ex-observe-tests"].status == "solution error"
     assert "MemoryError" in by_id(g)["ex-observe-tests"].message
+
+
+def test_the_file_size_limit_binds_where_the_kernel_may_write(instructor, tmp_path,
+                                                             course_files):
+    """Its working directory, home and /tmp: a file past the limit fails (EFBIG, or the
+    memory folder's own size, ENOSPC, whichever comes first)."""
+    big = ("import errno, os, tempfile\nSEEN = []\n"
+           "for d in ('.', os.path.expanduser('~'), tempfile.gettempdir()):\n"
+           "    try:\n"
+           "        with open(os.path.join(d, 'big.bin'), 'wb') as f:\n"
+           "            f.write(b'x' * (3 << 20))\n"
+           "        SEEN.append('written')\n"
+           "    except OSError as e:\n"
+           "        SEEN.append(errno.errorcode[e.errno])\n"
+           "raise AssertionError('SIZES %s' % SEEN)\n")
+    g = grade(gs.submission(big, gs.SPEED_BODY), instructor, tmp_path,
+              limits=Limits(file_bytes=2 << 20, cell_timeout=20, call_timeout=4, deadline=60))
+    r = by_id(g)["ex-observe-tests"]
+    seen = eval(r.message.split("SIZES ")[1])
+    assert len(seen) == 3 and set(seen) <= {"EFBIG", "ENOSPC"} and "EFBIG" in seen, seen
+    assert by_id(g)["ex-speed-tests"].points == gs.POINTS["ex-speed-tests"]
 
 
 # ------------------------------------------------------------------ the submission's metadata
@@ -267,46 +291,57 @@ PLANT = (
     "(d / 'compiled.gate_loop-43.py311.1.nbc').write_bytes(b'planted code')\n")
 
 
+@pytest.fixture
+def course_copy(tmp_path):
+    """A copy of the course's library for the attacks that succeed without a sandbox
+    (isolation 'none'): they write there, never into the checkout that the other tests,
+    graders included, read meanwhile."""
+    lib = tmp_path / "course" / "annslam_lib"
+    import shutil
+    shutil.copytree(ROOT / "annslam_lib", lib)
+    return lib
+
+
 def test_a_planted_numba_cache_is_deleted_after_the_submission(instructor, tmp_path,
-                                                              course_files):
+                                                              course_files, course_copy):
     """Without a sandbox (isolation 'none') a submission can write next to the library; numba
     would unpickle a cache file planted there in the instructor's next long run
     (slam.compiled). New or changed cache files are deleted after the submission; one
     that was there before and did not change stays."""
-    cache = ROOT / "annslam_lib" / "slam" / "__pycache__"
+    cache = course_copy / "slam" / "__pycache__"
     cache.mkdir(exist_ok=True)
     kept = cache / "compiled.kept_by_the_instructor.nbi"
     kept.write_bytes(b"the instructor's own")
-    try:
-        attack = PLANT.format(folder=str(cache)) + gs.OBSERVE_BODY
-        g = grade(gs.submission(attack, gs.SPEED_BODY), instructor, tmp_path, isolation="none")
-        assert g.score == FULL, g.report()               # not held against the student
-        assert not list(cache.glob("compiled.gate_loop-43.py311*")), "a planted file is left"
-        assert kept.read_bytes() == b"the instructor's own"
-    finally:
-        kept.unlink(missing_ok=True)
-        for p in cache.glob("compiled.gate_loop-43.py311*"):
-            p.unlink()
+    attack = PLANT.format(folder=str(cache)) + gs.OBSERVE_BODY
+    g = grade(gs.submission(attack, gs.SPEED_BODY), instructor, tmp_path, isolation="none",
+              guard=[course_copy])
+    assert g.score == FULL, g.report()               # not held against the student
+    assert not list(cache.glob("compiled.gate_loop-43.py311*")), "a planted file is left"
+    assert kept.read_bytes() == b"the instructor's own"
 
 
-@pytest.mark.parametrize("isolation", ["bwrap", "nobody", "none"])
+@pytest.mark.parametrize("isolation", ["bwrap", "none"])
 def test_writing_to_the_course_library_changes_nothing_for_the_next_student(
-        isolation, instructor, tmp_path, course_files):
+        isolation, instructor, tmp_path, course_files, course_copy):
     if isolation == "bwrap" and bwrap_available() is None:
         pytest.skip("bubblewrap is not installed here (apt-get install bubblewrap)")
-    if isolation == "nobody" and (why := nobody_available()) is not None:
-        pytest.skip(f"isolation 'nobody' is not possible here: {why}")
-    target = str(ROOT / "annslam_lib" / "grading" / "observation.py")
+    lib = course_copy if isolation == "none" else ROOT / "annslam_lib"
+    target = str(lib / "grading" / "observation.py")
     before = Path(target).read_bytes()
     attack = WRITE.format(target=target) + "def my_observe(pose, landmark):\n    return 1.0, 0.0"
-    g = grade(gs.submission(attack), instructor, tmp_path, isolation=isolation)
+    if isolation == "none":          # the write went through: undone, and grading stops
+        with pytest.raises(GradingEnvironmentError, match="course files changed") as e:
+            grade(gs.submission(attack), instructor, tmp_path, isolation=isolation,
+                  guard=[lib])
+        g = e.value.grade
+        assert any("restored" in n for n in g.notes), g.notes
+        assert {r.status for r in g.exercises} == {"tampered"}
+    else:                            # the write itself failed: the library is not there
+        g = grade(gs.submission(attack), instructor, tmp_path, isolation=isolation)
+        assert "Error" in by_id(g)["ex-observe-tests"].message
     assert g.score == 0
     assert Path(target).read_bytes() == before, "the library file was left changed"
-    if isolation == "none":          # the write went through: detected and undone
-        assert any("restored" in n for n in g.notes)
-    else:                            # the write itself failed
-        assert "Error" in by_id(g)["ex-observe-tests"].message
-    nxt = grade(gs.submission(), instructor, tmp_path / "next", isolation=isolation)
+    nxt = grade(gs.submission(), instructor, tmp_path / "next", isolation=isolation, guard=[lib])
     assert nxt.score == 0 and {r.status for r in nxt.exercises} == {"not written"}
 
 
@@ -394,6 +429,7 @@ def test_a_batch_grades_everything_it_can_and_reports_the_rest(instructor, tmp_p
     assert len(results) == 6
 
 
+@pytest.mark.needs_sandbox
 def test_the_grade_command_exit_code_and_json(instructor, tmp_path, course_files):
     from annslam_lib.course.cli import main
 

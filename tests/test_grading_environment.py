@@ -97,34 +97,69 @@ def test_a_course_under_tmp_grades_an_honest_submission_in_full(hidden_course, t
                                              for e in rows["bob"]["exercises"])
 
 
-def test_bubblewrap_mounts_bind_the_interpreter_back_and_keep_hidden_folders_hidden(
-        tmp_path, monkeypatch):
-    """The mount list, read without running it: /tmp and the hidden folders emptied first,
-    the interpreter and data bound back after them, deeper mounts after shallower ones."""
-    monkeypatch.setattr(sandbox, "bwrap_available", lambda: "/usr/bin/bwrap")
-    data = tmp_path / "hidden" / "data"
-    data.mkdir(parents=True)
-    inner = Path(sys.prefix) / "annslam-test-hidden"
-    monkeypatch.setenv("ANNSLAM_DATA", str(data))
-    sb = Sandbox.__new__(Sandbox)
-    sb.isolation, sb.root, sb.work = "bwrap", tmp_path / "scratch", tmp_path / "scratch" / "w"
-    sb.hide = [tmp_path / "hidden", inner]
-    inner.mkdir(exist_ok=True)
-    try:
-        args = sb._prefix()
-    finally:
-        inner.rmdir()
-    pairs = [(args[i], args[i + 1]) for i in range(len(args) - 1)
-             if args[i] in ("--tmpfs", "--ro-bind", "--bind")]
-    order = {(k, p): n for n, (k, p) in enumerate(pairs)}
-    assert order[("--tmpfs", "/tmp")] < order[("--ro-bind", str(Path(sys.prefix).resolve()))]
-    assert order[("--tmpfs", str(tmp_path / "hidden"))] < order[("--ro-bind", str(data))]
-    assert order[("--ro-bind", str(Path(sys.prefix).resolve()))] < order[("--tmpfs", str(inner))]
-    site = next(p for p in sys.path if p.endswith("site-packages"))
-    assert ("--ro-bind", site) in order                    # what a .pth line may point to
-    for p in sandbox.interpreter_paths():
-        assert ("--ro-bind", str(p)) in order, p
-    assert pairs[-1] == ("--bind", str(sb.root))
+def test_the_mount_plan_binds_what_is_needed_and_leaves_hidden_folders_out(tmp_path):
+    """The sandbox's file system, read without running it (sandbox.mount_plan): a needed
+    folder holding a hidden one is rebuilt from its other entries (the hidden one is not
+    there at all, not covered); a needed folder inside a hidden one is bound alone; links
+    on the way are recreated as links; memory folders come before the binds inside them;
+    optional folders that hold or lie in a hidden one are left out."""
+    t = tmp_path
+    (t / "env" / "secret").mkdir(parents=True)            # a hidden folder inside the env
+    (t / "env" / "secret" / "answers.txt").write_text("x")
+    (t / "env" / "bin").mkdir()
+    (t / "env" / "readme").write_text("x")
+    (t / "env" / "lib").symlink_to("bin")
+    (t / "course" / ".venv").mkdir(parents=True)          # the venv inside the hidden checkout
+    (t / "course" / "notebooks").mkdir()
+    (t / "data").mkdir()
+    (t / "link-to-data").symlink_to(t / "data")
+    (t / "course" / "tests").mkdir()
+    steps = sandbox.mount_plan(
+        [t / "env", t / "course" / ".venv", t / "link-to-data"],
+        [t / "course", t / "course" / "tests", t / "env" / "bin", t],
+        [t / "env" / "secret", t / "course"],
+        first=[("tmpfs", t, 1 << 20, "1777")], extra=[("bind", t / "ipc", t / "ipc")])
+    binds = [s[2] for s in steps if s[0] in ("ro-bind", "bind")]
+    made = [s[-1] if s[0] != "tmpfs" else s[1] for s in steps]
+    first_bind = next(k for k, s in enumerate(steps) if s[0] in ("ro-bind", "bind", "symlink"))
+    assert ("tmpfs", t, 1 << 20, "1777") in steps[:first_bind]   # before every bind under it
+    assert t / "env" / "bin" in binds and t / "env" / "readme" in binds
+    assert ("symlink", "bin", t / "env" / "lib") in steps
+    for gone in (t / "env" / "secret", t / "course" / "notebooks", t / "course" / "tests",
+                 t / "course"):
+        assert gone not in binds and not any(p == gone or gone in Path(p).parents
+                                              for p in binds if p != t / "course" / ".venv"), gone
+    assert t / "course" / ".venv" in binds                  # needed, inside a hidden folder
+    assert not any(s[0] == "dir" and s[1] == t / "env" / "secret" for s in steps)
+    assert ("symlink", str(t / "data"), t / "link-to-data") in steps and t / "data" in binds
+    assert binds[-1] == t / "ipc" and t not in binds        # optional t holds hidden folders
+    # every folder on the way to a bind is made (world-readable) before it
+    for k, s in enumerate(steps):
+        if s[0] in ("ro-bind", "bind"):
+            for a in s[2].parents:
+                if a != Path("/"):
+                    assert a in made[:k] or any(x[0] == "tmpfs" and x[1] == a for x in steps[:k]), (a, s)
+
+
+def test_the_kernel_sees_the_environment_but_not_the_course(tmp_path):
+    """A real kernel: the interpreter's folders and the data are there, the course's checkout
+    is not (not even its top folder's other entries), nor a hidden folder."""
+    if bwrap_available() is None:
+        pytest.skip(f"bubblewrap cannot be used here: {sandbox.bwrap_problem()}")
+    from annslam_lib.data import fetch
+
+    hidden = tmp_path / "hidden"
+    hidden.mkdir()
+    probe = (f"import os, sys\nR = repr(["
+             f"os.path.exists({str(ROOT / 'notebooks')!r}), os.path.exists({str(ROOT / '.git')!r}),"
+             f"os.path.exists({str(ROOT / 'annslam_lib')!r}), os.path.exists({str(hidden)!r}),"
+             f"os.path.isdir(sys.prefix), os.path.isdir({str(fetch.data_dir())!r})])")
+    with Sandbox(LIMITS, hide=[hidden]) as sb:
+        sb.start()
+        res = sb.execute(probe, 60, user_expressions={"r": "R"})
+        assert res.ok, res.reason()
+        assert res.user_expressions["r"]["data"]["text/plain"] == \
+            repr("[False, False, False, False, True, True]")
 
 
 def test_a_bubblewrap_without_rights_stops_the_grade_command_with_its_reason(tmp_path):
@@ -172,6 +207,7 @@ def test_a_library_that_fails_to_import_in_the_kernel_is_no_student_s_zero(tmp_p
                                 limits=LIMITS)
 
 
+@pytest.mark.needs_sandbox
 def test_the_grade_command_exits_3_when_the_kernel_cannot_import_the_library(tmp_path):
     lib = _broken_library(tmp_path)
     inst = tmp_path / "instructor" / "chapter.ipynb"
@@ -189,8 +225,11 @@ def test_the_grade_command_exits_3_when_the_kernel_cannot_import_the_library(tmp
 
 
 def test_a_kernel_that_cannot_start_is_the_environment_s_fault(tmp_path, monkeypatch):
-    monkeypatch.setattr(sandbox, "_LAUNCHER", "import sys\nprint('launcher broken', "
-                        "file=sys.stderr)\nsys.exit(3)")
+    lib = tmp_path / "broken" / "annslam_lib"
+    shutil.copytree(ROOT / "annslam_lib", lib, ignore=shutil.ignore_patterns("__pycache__"))
+    (lib / "course" / "confine.py").write_text("import sys\nprint('launcher broken', "
+                                               "file=sys.stderr)\nsys.exit(3)\n")
+    monkeypatch.setattr(sandbox, "LIB", lib)
     inst = tmp_path / "instructor" / "chapter.ipynb"
     gs.write(gs.instructor(), inst)
     sub = tmp_path / "sub" / "chapter.ipynb"

@@ -230,3 +230,93 @@ def test_a_class_of_three_fetches_answers_submits_and_sees_its_own_feedback(clas
             s.close()
         browser.close()
         pw.stop()
+
+
+HOSTILE_CHAPTER = "02_laser_offset"
+
+
+@pytest.mark.needs_sandbox
+def test_hostile_submissions_through_class_grade(class_hub, tmp_path):
+    """The same attacks as tests/test_grader_hostile.py through `class grade` on this hub,
+    as root: the exchange, the course folder and the hub's state are not in the sandbox,
+    each submission scores what its honest content earns, the feedback pages are inert,
+    and no file of the exchange or of the other submissions changes."""
+    import hashlib
+
+    import grading_support as gs
+    import hostile_support as hs
+    import nbformat
+    from annslam_lib.course import release, sandbox
+
+    h, _ = class_hub
+    layout = h.layout
+    source = ROOT / "notebooks" / f"{HOSTILE_CHAPTER}.ipynb"
+    bodies = gs.solution_bodies(source)
+    points = {c.metadata["nbgrader"]["grade_id"]: c.metadata["nbgrader"]["points"]
+              for c in nbformat.read(source, as_version=4).cells
+              if c.metadata.get("nbgrader", {}).get("grade")}
+    first = next(iter(bodies))                          # the exercise the attack replaces
+    first_points = points[f"{first}-tests"]
+    canary = hs.Canary(tmp_path / "canary")
+    os.chmod(tmp_path, 0o755)
+    other = layout.course / "submitted" / "honest1" / HOSTILE_CHAPTER / f"{HOSTILE_CHAPTER}.ipynb"
+    cfg = hs.config(course=str(ROOT), canary_open=str(canary.root / "open"),
+                    secret=str(canary.root / "secret.txt"), socket=canary.socket_path,
+                    abstract=canary.abstract, tcp=canary.tcp, other_submission=str(other),
+                    grader_pid=os.getpid(),
+                    hidden={"exchange": str(layout.exchange), "course": str(layout.course),
+                            "state": str(layout.state), "notebooks": str(ROOT / "notebooks"),
+                            "git": str(ROOT / ".git")})
+    import re
+    name = re.search(r"def (\w+)\(", bodies[first]).group(1)
+    attacks = {"honest1": None, "honest2": None, "prober": hs.PROBE.replace("{cfg}", cfg),
+               "ansi": hs.ANSI.replace("my_observe(pose, landmark)", f"{name}(*args, **kw)")}
+    for student, attack in attacks.items():
+        nb = release.student_version(nbformat.read(source, as_version=4), HOSTILE_CHAPTER)
+        for c in nb.cells:
+            gid = c.metadata.get("nbgrader", {}).get("grade_id")
+            if gid in bodies:
+                c.source = bodies[gid]
+                if gid == first and attack is not None:
+                    c.source = attack
+        gs.write(nb, layout.course / "submitted" / student / HOSTILE_CHAPTER /
+                 f"{HOSTILE_CHAPTER}.ipynb")
+
+    def digest(folder):
+        return {str(p): hashlib.sha256(p.read_bytes()).hexdigest()
+                for p in sorted(folder.rglob("*")) if p.is_file()}
+
+    before = {**digest(layout.exchange), **digest(layout.course / "submitted")}
+    try:
+        _class_chapter(h, "grade", HOSTILE_CHAPTER)
+    finally:
+        canary.close()
+    after = {**digest(layout.exchange), **digest(layout.course / "submitted")}
+    assert after == before
+    assert set(canary.files()) == {"open", "secret.txt", "owner.sock"}
+    assert canary.accepted == {"socket": 0, "abstract": 0, "tcp": 0}
+    grades = {g["student"]: g for g in json.loads(
+        (layout.course / "grades" / f"{HOSTILE_CHAPTER}.json").read_text())}
+    total = sum(points.values())
+    assert grades["honest1"]["score"] == grades["honest2"]["score"] == total
+    assert grades["prober"]["score"] == total - first_points
+    assert grades["ansi"]["score"] == total - first_points
+    probe = next(e for e in grades["prober"]["exercises"] if e["grade_id"] == f"{first}-tests")
+    s = hs.seen(probe["message"])
+    assert int(s["uid"][0]) in sandbox.SANDBOX_IDS and int(s["CapEff"], 16) == 0
+    for name in ("exchange", "course", "state", "notebooks", "git"):
+        assert s["exists " + name] is False and s["umount " + name] == [-1, "EPERM"], name
+    assert s["remount /"] == [-1, "EPERM"] and s["write canary"] == "ENOENT"
+    assert s["rewrite other submission"] == "ENOENT" and s["host socket"] == "ENOENT"
+    page = (layout.course / "feedback" / "ansi" / HOSTILE_CHAPTER /
+            f"{HOSTILE_CHAPTER}.html").read_text()
+    assert "\\x1b[2J" in page                              # shown, escaped
+    for ch in ("\x1b", "\r", "\b", "\u202e"):
+        assert ch not in page, repr(ch)
+
+
+def _class_chapter(h, action: str, chapter: str) -> None:
+    env = dict(os.environ, ANNSLAM_HUB_DIR=str(h.layout.root))
+    out = subprocess.run([sys.executable, "-m", "annslam_lib", "class", action, chapter],
+                         env=env, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, f"class {action}: {out.stdout[-3000:]}\n{out.stderr[-3000:]}"

@@ -4,7 +4,10 @@
 - ``workspace``: a student's own copy of the course, never overwritten
 - ``grader``: scores from the instructor's notebook, decided outside the student's code
 - ``plan``: the instructor's notebook read as the skeleton of a grade; a solution's names
-- ``sandbox``: the kernel that runs student code (bubblewrap, limits, time-outs, deadline)
+- ``integrity``: what the grader loads and watches (its bytecode, the course's files), inert
+  reports
+- ``sandbox``: the kernel that runs student code (bubblewrap, no privilege, limits, time-outs)
+- ``confine``: the sandbox's launcher (limits, the drop of privilege, the system-call filter)
 - ``codec``: data, never code, between the grader and that kernel
 - ``kernel_side``: the grader's small helper inside the kernel
 - ``kernels``: Run All on a fresh kernel with a client that cannot stall silently
@@ -16,5 +19,5 @@
 - ``cli``: ``python -m annslam_lib ...``
 """
 
-__all__ = ["release", "workspace", "grader", "plan", "sandbox", "codec", "kernel_side",
-           "kernels", "hub", "hub_config", "hub_setup", "hub_class", "cli"]
+__all__ = ["release", "workspace", "grader", "plan", "integrity", "sandbox", "confine", "codec",
+           "kernel_side", "kernels", "hub", "hub_config", "hub_setup", "hub_class", "cli"]

@@ -239,17 +239,20 @@ def _add_release(sub) -> None:
 
 def _grade(args: argparse.Namespace) -> int:
     from .grader import GradingEnvironmentError, grade_batch
-    from .sandbox import Limits
+    from .sandbox import NO_SANDBOX_WARNING, Limits
 
     limits = Limits(cpu_seconds=int(args.cpu), memory_bytes=int(args.memory * (1 << 30)),
                     cell_timeout=float(args.timeout), call_timeout=float(args.call_timeout),
                     deadline=float(args.deadline))
+    if args.isolation == "none":
+        print(f"annslam grade: WARNING: {NO_SANDBOX_WARNING}", file=sys.stderr)
     try:
         results = grade_batch(args.submissions, instructor_dir=args.instructor,
                               json_path=args.json, limits=limits, isolation=args.isolation)
     except GradingEnvironmentError as e:
+        from .integrity import inert
         print(f"annslam grade: the grading environment is broken, so no submission was "
-              f"scored from here on: {e}", file=sys.stderr)
+              f"scored from here on: {inert(str(e))}", file=sys.stderr)
         return 3
     bad = [r for r in results if not r.graded]
     total = len(results)
@@ -290,8 +293,9 @@ def _add_grade(sub) -> None:
     p.add_argument("--instructor", metavar="DIR", help="folder of the instructor notebooks "
                    "(default: the course's notebooks/)")
     p.add_argument("--isolation", choices=ISOLATIONS, default="auto",
-                   help="auto (default): bubblewrap if it works here, else the user nobody "
-                        "when run as root, else none")
+                   help="auto or bwrap (default): the bubblewrap sandbox, student code without "
+                        "privilege; grading stops, naming the fix, where it cannot be made. "
+                        "none: student code with your own rights, only for a trusted notebook")
     p.add_argument("--timeout", type=_positive_float, default=d.cell_timeout, metavar="S",
                    help=f"per-cell time-out (default {d.cell_timeout:g} s)")
     p.add_argument("--call-timeout", type=_positive_float, default=d.call_timeout, metavar="S",
@@ -434,8 +438,9 @@ def _class(args: argparse.Namespace) -> int:
         finally:                     # what root wrote there, back to the instructor's account
             give_course(layout, args.instructor)
     except GradingEnvironmentError as e:
+        from .integrity import inert
         print(f"class grade: the grading environment is broken, so no submission was scored "
-              f"from here on: {e}", file=sys.stderr)
+              f"from here on: {inert(str(e))}", file=sys.stderr)
         return 3
     except HubError as e:
         print(f"class {args.action}: {e}", file=sys.stderr)

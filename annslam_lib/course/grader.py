@@ -9,10 +9,12 @@ Design, in three rules:
    and reported: edited, deleted or retyped test cells, changed points, unknown grade ids,
    cells added with grading metadata.
 2. **Student code runs in a sandbox, and only there.** One kernel per submission
-   (:class:`~annslam_lib.course.sandbox.Sandbox`: bubblewrap where available, else an
-   unprivileged user, a scratch folder, resource limits, time-outs, a deadline) runs the
-   instructor's course cells and the student's solution cells, in order. Test cells are
-   *not* run there.
+   (:class:`~annslam_lib.course.sandbox.Sandbox`: bubblewrap, no privilege whoever starts
+   the grader, nothing of the machine but the system, the Python environment and the data,
+   resource limits, time-outs, a deadline) runs the instructor's course cells and the
+   student's solution cells, in order. Test cells are *not* run there. Where the sandbox
+   cannot be made, grading stops (isolation 'none', the grader's own rights, only when
+   asked for, for a trusted notebook).
 3. **Scores are decided outside the student's process.** Each test cell is executed by the
    grader, in its own process, with the genuine check modules; the names the test cell
    takes from the student (``my_observe``) are :class:`RemoteFunction` proxies that send
@@ -27,9 +29,16 @@ the names it defines, with the reason; a kernel that dies is restarted and the n
 good cells replayed, so one broken exercise does not take the others with it. A check may
 declare library functions a solution must not call (``grading.core.forbids``); a solution
 that calls one scores 0 ("my_observe calls annslam_lib.models.observation.observe: write it
-yourself"), found both in its source and by a call monitor in the kernel. What the monitor
-cannot stop: a student who copies the library's code into the answer, or hides a call from
-both the source reading and the monitor; the README says so.
+yourself"), found both in its source (and in the helpers it uses from the student's other
+cells) and by a call monitor in the kernel (every thread). What the monitor cannot stop: a
+student who copies the library's code into the answer, or hides a call from both the
+source reading and the monitor; the README says so.
+
+Nothing the grader's own process loads can come from a submission: its bytecode lives in
+a private folder (:func:`prepare_grader`), and every file of the course's folders,
+``__pycache__`` and ``.git`` included, is watched while a batch is graded
+(:class:`Guard`); a change stops the batch with a :class:`GradingEnvironmentError`. Every
+text a submission can influence is made inert (:func:`inert`) before it is reported.
 
 Batch grading (:func:`grade_batch`) grades every submission it can, gives each one it
 cannot a reason, and writes one JSON file after every submission.
@@ -39,7 +48,6 @@ from __future__ import annotations
 import ast
 import builtins
 import contextlib
-import hashlib
 import io
 import json
 import os
@@ -50,9 +58,11 @@ from pathlib import Path
 
 from ..grading.core import GradingError, forbidden, forbidden_message
 from . import codec
+from .integrity import Guard, course_folders, inert, prepare_grader
 from .plan import (CODE_STUB, GradePlan, PlannedCell, _defined_names, _meta, _read_notebook,
                    free_names, plan, static_forbidden)
-from .sandbox import ExecResult, GradingEnvironmentError, KernelStartError, Limits, Sandbox
+from .sandbox import (NO_SANDBOX_WARNING, ExecResult, GradingEnvironmentError,
+                      KernelStartError, Limits, Sandbox)
 
 __all__ = ["ExerciseResult", "SubmissionGrade", "grade_submission", "grade_batch",
            "check_environment", "GradingEnvironmentError", "RemoteFunction", "student_of",
@@ -104,6 +114,8 @@ class SubmissionGrade:
             return f"{self.submission}{who}: NOT GRADED: {self.reason}"
         lines = [f"{self.submission}{who}: {self.score:g} / {self.max_score:g} points "
                  f"({self.seconds:.1f} s, sandbox: {self.isolation})"]
+        if self.isolation == "none":
+            lines.append(f"  WARNING: {NO_SANDBOX_WARNING}")
         for r in self.exercises:
             mark = "ok  " if r.status == "passed" else "FAIL"
             lines.append(f"  {mark} {r.grade_id} ({r.points:g}/{r.max_points:g})"
@@ -115,6 +127,22 @@ class SubmissionGrade:
         lines += [f"  FLAG {f['exercise']}: {f['similarity']:.2f} similar to {f['other']} "
                   f"(copied code? not scored: the instructor decides)" for f in self.flags]
         return "\n".join(lines)
+
+    def make_inert(self) -> SubmissionGrade:
+        """Escape, in every text a submission can influence, the characters a terminal or
+        a page would act on (:func:`inert`)."""
+        self.submission = inert(self.submission)
+        self.student = None if self.student is None else inert(self.student)
+        self.assignment = None if self.assignment is None else inert(self.assignment)
+        self.reason = inert(self.reason)
+        self.notes = [inert(n) for n in self.notes]
+        self.errors = [inert(e) for e in self.errors]
+        for r in self.exercises:
+            r.message = inert(r.message)
+            r.grade_id = inert(r.grade_id)
+        for f in self.flags:
+            f["other"] = inert(str(f["other"]))
+        return self
 
     def as_json(self) -> dict:
         d = asdict(self)
@@ -337,9 +365,11 @@ def _exercise(session: _Session, cell: PlannedCell, solutions: dict[str, int]) -
     # 2. forbidden library calls, read from the source
     checks = _checks_used(cell.source, ns)
     paths = tuple(p for c in checks for p in getattr(c, "__annslam_forbids__", ()))
+    mine = [c.source for c in session.plan.cells if c.role == "solution"]
     for name in student_names:
         k = solutions[name]
-        hits = static_forbidden(session.plan.cells[k].source, session.plan.context, paths)
+        hits = static_forbidden(session.plan.cells[k].source, session.plan.context, paths,
+                                helpers=mine)
         if hits:
             return result("forbidden", forbidden_message(name, hits))
     if session.helper_error:
@@ -466,69 +496,6 @@ def flag_copied_code(results: list[SubmissionGrade], *, threshold: float | None 
     return n
 
 
-# ------------------------------------------------------------------------------ integrity
-
-def _fingerprint(folders) -> dict[str, str]:
-    out = {}
-    for folder in folders:
-        folder = Path(folder)
-        if not folder.exists():
-            continue
-        for p in sorted(folder.rglob("*")):
-            if p.is_file() and "__pycache__" not in p.parts:
-                with contextlib.suppress(OSError):
-                    out[str(p)] = hashlib.sha256(p.read_bytes()).hexdigest()
-    return out
-
-
-# numba's on-disk cache (slam.compiled), in __pycache__ next to the module: an index numba
-# unpickles and machine code it runs, so a planted file runs code in the next long run of
-# whoever uses that library. __pycache__ is not guarded above (any process that imports the
-# library rewrites Python's bytecode there), and a legitimate process of the instructor may
-# write this cache while a submission runs, so a new or changed cache file is not held
-# against the student: it is deleted after the submission (numba compiles again, 0.3 s).
-def _compiled_cache(folders) -> dict[str, str]:
-    out = {}
-    for folder in folders:
-        for p in Path(folder).rglob("*.nb[ic]"):          # numba's index and code files
-            with contextlib.suppress(OSError):
-                out[str(p)] = hashlib.sha256(p.read_bytes()).hexdigest()
-    return out
-
-
-def _drop_new_compiled_cache(before: dict[str, str], folders) -> None:
-    for path, digest in _compiled_cache(folders).items():
-        if before.get(path) != digest:
-            with contextlib.suppress(OSError):
-                os.unlink(path)
-
-
-def _snapshot(folders) -> dict[str, bytes]:
-    out = {}
-    for folder in folders:
-        for p in sorted(Path(folder).rglob("*")):
-            if p.is_file() and "__pycache__" not in p.parts:
-                with contextlib.suppress(OSError):
-                    out[str(p)] = p.read_bytes()
-    return out
-
-
-def _restore(backup: dict[str, bytes], folders) -> list[str]:
-    """Put back every file of ``backup`` that changed or vanished, remove new ones."""
-    changed = []
-    now = _fingerprint(folders)
-    for path, data in backup.items():
-        if now.get(path) != hashlib.sha256(data).hexdigest():
-            Path(path).parent.mkdir(parents=True, exist_ok=True)
-            Path(path).write_bytes(data)
-            changed.append(path)
-    for path in set(now) - set(backup):
-        with contextlib.suppress(OSError):
-            os.unlink(path)
-        changed.append(path)
-    return sorted(changed)
-
-
 # ------------------------------------------------------------------------------ entry points
 
 def student_of(path) -> tuple[str | None, str | None]:
@@ -546,23 +513,23 @@ def grade_submission(path, instructor, *, limits: Limits = Limits(), isolation: 
     Never raises for a bad submission: an ungradable one comes back with ``graded=False``
     and its reason. Raises :class:`GradingEnvironmentError` when the grading machine is at
     fault (no sandbox, a kernel that cannot start or import the library before any student
-    code ran): that is never a student's score. ``guard``: folders whose files must not change (checked and restored
-    when the sandbox cannot guarantee it)."""
+    code ran, a course file changed while this submission was graded): that is never a
+    student's score; the exception's ``grade`` holds this submission's result when there is
+    one. ``guard``: a :class:`Guard`, or folders to make one of, checked after the
+    submission."""
+    if guard is not None and not isinstance(guard, Guard):
+        guard = Guard(guard, restorable=guard)
     t0 = time.monotonic()
     path = Path(path).resolve()
     student, assignment = student_of(path)
     g = SubmissionGrade(str(path), Path(instructor).name, student, assignment)
     try:
         inst = _read_notebook(Path(instructor), "instructor notebook")
-    except ValueError as e:
-        g.graded, g.reason = False, str(e)
-        return g
-    try:
         sub = _read_notebook(path, "submission")
         gplan = plan(inst, sub)
     except ValueError as e:
         g.graded, g.reason = False, str(e)
-        return g
+        return g.make_inert()
     g.notes = gplan.notes
     solutions = {}
     for k, c in enumerate(gplan.cells):
@@ -573,9 +540,7 @@ def grade_submission(path, instructor, *, limits: Limits = Limits(), isolation: 
     tests = [c for c in gplan.cells if c.role == "test"]
     g.max_score = sum(c.points for c in tests)
     g.solution_sources = _solution_sources(gplan, tests, solutions)
-    guard = [Path(p) for p in (guard or [])]
-    backup = _snapshot(guard) if guard else {}
-    compiled_before = _compiled_cache(guard)
+    tampered: list[str] = []
     try:
         with Sandbox(limits, isolation=isolation, hide=hide) as sb:
             g.isolation = sb.isolation
@@ -604,18 +569,29 @@ def grade_submission(path, instructor, *, limits: Limits = Limits(), isolation: 
     except Exception as e:               # the grader's own trouble: say so, never a score
         g.graded, g.reason = False, f"grading failed: {type(e).__name__}: {e}"
     finally:
-        _drop_new_compiled_cache(compiled_before, guard)
-        if guard:
-            changed = _restore(backup, guard)
-            if changed:
-                g.notes.append(f"the submission changed {len(changed)} course file(s) outside "
-                               f"its scratch folder (e.g. {changed[0]}); they were restored "
-                               "and the submission scores 0")
-                for r in g.exercises:
-                    r.points, r.status = 0.0, "tampered"
-                    r.message = "the submission changed the course's files"
+        if guard is not None:
+            tampered = guard.changes()
+    if tampered:
+        lost = guard.restore(tampered)
+        by = ("by this submission, which ran unsandboxed" if g.isolation == "none" else
+              "while this submission was graded (not by it: the sandbox cannot write there)")
+        g.notes.append(f"{len(tampered)} course file(s) changed {by}: "
+                       + ", ".join(tampered[:5]) + ("; restored" if not lost else
+                                                    f"; NOT restorable: {', '.join(lost[:5])}"))
+        if g.isolation == "none":
+            for r in g.exercises:
+                r.points, r.status = 0.0, "tampered"
+                r.message = "the submission changed the course's files"
     g.score = sum(r.points for r in g.exercises)
     g.seconds = round(time.monotonic() - t0, 2)
+    g.make_inert()
+    if tampered:
+        err = GradingEnvironmentError(
+            f"course files changed while {g.submission} was graded ({g.notes[-1]}); grading "
+            "stops here: check the machine (and restore anything not restorable from a clean "
+            "copy of the course) before grading again")
+        err.grade = g
+        raise err
     return g
 
 
@@ -635,10 +611,10 @@ def check_environment(*, limits: Limits = Limits(), isolation: str = "auto",
                       hide=()) -> str:
     """Start a grading kernel with no student code, import the course's library and NumPy in
     it, and return the isolation used; raise :class:`GradingEnvironmentError` naming the
-    cause if any of it fails (bubblewrap refused, an interpreter or library the sandbox
-    hides, a broken install)."""
+    cause if any of it fails (no bubblewrap or no rights to use it, an interpreter or
+    library the sandbox cannot reach, a broken install)."""
     probe = ("import os, numpy, annslam_lib, annslam_lib.course.kernel_side\n"
-             "assert annslam_lib.__file__.startswith(os.path.dirname(os.getcwd())), "
+             "assert annslam_lib.__file__.startswith(os.environ['PYTHONPATH']), "
              "f'the kernel imported {annslam_lib.__file__}, not the snapshot'")
     with Sandbox(limits, isolation=isolation, hide=hide) as sb:
         try:
@@ -659,29 +635,41 @@ def grade_batch(paths, *, instructor_dir=None, json_path=None, limits: Limits = 
     """Grade every submission in ``paths`` (files, or folders searched for notebooks) against
     the instructor notebook of the same file name in ``instructor_dir`` (default the
     course's ``notebooks/``). A submission that cannot be graded gets its reason and the
-    others go on; ``json_path`` is rewritten after every submission. ``hide``: more folders
-    the student's code must not see (besides the instructor's and the submissions' own)."""
+    others go on; ``json_path`` is rewritten after every submission. The student's code
+    never sees the course's checkout, the instructor notebooks, the other submissions, the
+    JSON's folder or ``hide`` (more folders). Raises :class:`GradingEnvironmentError` (the
+    JSON keeping what was graded before) when the sandbox cannot be made or a course file
+    changes (:class:`Guard`)."""
     inst_dir = Path(instructor_dir or ROOT / "notebooks").resolve()
     subs = _submissions(paths)
-    hide = {inst_dir} | {p.resolve().parent for p in subs} | {Path(h).resolve() for h in hide}
-    guard = [ROOT / "annslam_lib", inst_dir]
-    from ..data import fetch
-    if fetch.data_dir().exists():
-        guard.append(fetch.data_dir())
-    results = []
+    hide = ({inst_dir} | {p.resolve().parent for p in subs} | {Path(h).resolve() for h in hide}
+            | ({Path(json_path).resolve().parent} if json_path else set()))
+    results: list[SubmissionGrade] = []
     if any(p.exists() for p in subs):
+        prepare_grader(isolation)
         check_environment(limits=limits, isolation=isolation, hide=hide)
+    guarded, restorable = course_folders(inst_dir, isolation=isolation)
+    guard = Guard(guarded, restorable=restorable)
     for p in subs:
         inst = inst_dir / p.name
         if not p.exists():
             g = SubmissionGrade(str(p.resolve()), p.name, *student_of(p), graded=False,
-                                reason="no such file")
+                                reason="no such file").make_inert()
         elif not inst.exists():
             g = SubmissionGrade(str(p.resolve()), p.name, *student_of(p), graded=False,
-                                reason=f"no instructor notebook {p.name} in {inst_dir}")
+                                reason=f"no instructor notebook {p.name} in {inst_dir}"
+                                ).make_inert()
         else:
-            g = grade_submission(p, inst, limits=limits, isolation=isolation, hide=hide,
-                                 guard=guard)
+            try:
+                g = grade_submission(p, inst, limits=limits, isolation=isolation, hide=hide,
+                                     guard=guard)
+            except GradingEnvironmentError as e:
+                if getattr(e, "grade", None) is not None:
+                    results.append(e.grade)
+                    log(e.grade.report())
+                    if json_path:
+                        _write_json(json_path, results)
+                raise
         results.append(g)
         log(g.report())
         if json_path:

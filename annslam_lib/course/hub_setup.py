@@ -161,6 +161,17 @@ def check_private() -> None:
                        "you can open (the hub needs only its own folder to be open)")
 
 
+def check_grading() -> None:
+    """The class's work is graded in the course's sandbox: refuse to start a hub on a
+    machine where it cannot be made, naming the cause and the fix."""
+    from .sandbox import bwrap_problem
+
+    why = bwrap_problem()
+    if why:
+        raise HubError(f"the course's grader could not sandbox the students' code here "
+                       f"(./course.sh class grade would refuse): {why}")
+
+
 def warm_class_studies(layout: HubLayout, notebooks: Path | None = None) -> None:
     """The class's study cache: Run All of every chapter once, by the students' own
     environment with a student server's settings (the same library code and BLAS threads,
@@ -237,6 +248,7 @@ def start(layout: HubLayout, class_file, *, port: int = 8000,
     """Prepare, then replace this process by JupyterHub (``hub.json`` names it)."""
     env = dict(os.environ if env is None else env)
     check_private()
+    check_grading()
     students = prepare(layout, class_file, instructor, studies=studies)
     env.update(passwords(layout, env))
     env.update({"ANNSLAM_HUB_DIR": str(layout.root), "ANNSLAM_HUB_CLASS":

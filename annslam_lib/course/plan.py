@@ -6,6 +6,7 @@ from __future__ import annotations
 import ast
 import builtins
 import importlib
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -56,14 +57,20 @@ def free_names(source: str) -> set[str]:
     return read - bound - _BUILTINS
 
 
+def _trees(sources):
+    """The syntax tree of each source that parses (a cell with a syntax error is read as
+    empty: running it fails and says so)."""
+    for src in sources:
+        try:
+            yield ast.parse(src)
+        except SyntaxError:
+            continue
+
+
 def _grading_imports(sources: list[str]) -> list[str]:
     """The import statements of the notebook that bring in ``annslam_lib.grading``."""
     out = []
-    for src in sources:
-        try:
-            tree = ast.parse(src)
-        except SyntaxError:
-            continue
+    for tree in _trees(sources):
         for node in tree.body:
             if isinstance(node, ast.ImportFrom) and (node.module or "").startswith(
                     "annslam_lib.grading"):
@@ -77,11 +84,7 @@ def _grading_imports(sources: list[str]) -> list[str]:
 def _aliases(sources: list[str]) -> dict[str, str]:
     """{local name: dotted path} of every import in ``sources`` (for reading solutions)."""
     out = {}
-    for src in sources:
-        try:
-            tree = ast.parse(src)
-        except SyntaxError:
-            continue
+    for tree in _trees(sources):
         for node in ast.walk(tree):
             if isinstance(node, ast.Import):
                 for a in node.names:
@@ -94,11 +97,20 @@ def _aliases(sources: list[str]) -> dict[str, str]:
 
 
 def _resolve_dotted(path: str):
+    """The object a dotted path names. Only the course's library is imported for it; any
+    other module is looked up among those already imported (a submission's source names
+    the path, and importing an arbitrary module runs its code in the grader)."""
     parts = path.split(".")
     for i in range(len(parts), 0, -1):
-        try:
-            obj = importlib.import_module(".".join(parts[:i]))
-        except Exception:
+        name = ".".join(parts[:i])
+        if name in sys.modules:
+            obj = sys.modules[name]
+        elif parts[0] == "annslam_lib":
+            try:
+                obj = importlib.import_module(name)
+            except Exception:
+                continue
+        else:
             continue
         try:
             for p in parts[i:]:
@@ -109,10 +121,30 @@ def _resolve_dotted(path: str):
     return None
 
 
-def static_forbidden(solution: str, context: list[str], forbidden_paths) -> list[str]:
+def _definitions(sources) -> dict[str, list[ast.AST]]:
+    """{name: the top-level statements of ``sources`` that define it} (functions, classes,
+    assignments)."""
+    out: dict[str, list[ast.AST]] = {}
+    for tree in _trees(sources):
+        for node in tree.body:
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+                out.setdefault(node.name, []).append(node)
+            elif isinstance(node, (ast.Assign, ast.AnnAssign, ast.AugAssign)):
+                targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+                for t in targets:
+                    for n in ast.walk(t):
+                        if isinstance(n, ast.Name):
+                            out.setdefault(n.id, []).append(node)
+    return out
+
+
+def static_forbidden(solution: str, context: list[str], forbidden_paths,
+                     helpers: list[str] = ()) -> list[str]:
     """Forbidden library functions the solution's source refers to: every name and
     attribute chain in it, resolved through the notebook's imports to an object, compared
-    with the forbidden functions (so re-exports and aliases are caught)."""
+    with the forbidden functions (so re-exports and aliases are caught). ``helpers``: the
+    sources of the student's other cells: a function, class or name the solution uses that
+    one of them defines is read too, and what that one uses, in turn."""
     if not forbidden_paths:
         return []
     targets = {}
@@ -121,13 +153,22 @@ def static_forbidden(solution: str, context: list[str], forbidden_paths) -> list
         obj = _resolve_dotted(f"{mod}.{qual}")
         if obj is not None:
             targets[id(getattr(obj, "__wrapped__", obj))] = p
-    aliases = _aliases(context + [solution])
+    aliases = _aliases(context + [solution, *helpers])
     try:
-        tree = ast.parse(solution)
+        trees: list[ast.AST] = [ast.parse(solution)]
     except SyntaxError:
         return []
+    defined = _definitions(helpers)
+    seen: set[str] = set()
+    k = 0
+    while k < len(trees):                        # the helpers the solution reaches
+        for n in ast.walk(trees[k]):
+            if isinstance(n, ast.Name) and n.id in defined and n.id not in seen:
+                seen.add(n.id)
+                trees += defined[n.id]
+        k += 1
     found = []
-    for node in ast.walk(tree):
+    for node in (n for t in trees for n in ast.walk(t)):
         chain = []
         cur = node
         while isinstance(cur, ast.Attribute):

@@ -1,31 +1,43 @@
-"""A Jupyter kernel for untrusted student code: scratch folder, sandbox, limits, deadlines.
+"""A Jupyter kernel for untrusted student code: no privilege, nothing but its own notebook.
 
-Each submission gets a fresh scratch folder (deleted afterwards) holding the kernel's working
-directory, its home, its IPC sockets and a snapshot copy of ``annslam_lib`` that the kernel
-imports instead of the instructor's editable source. The kernel is started:
+Each submission gets a fresh scratch folder (mode 700, deleted afterwards) holding a
+read-only snapshot of ``annslam_lib`` that the kernel imports instead of the instructor's
+editable source, the kernel's connection file and its IPC sockets. The kernelspec and the
+kernel's log stay in the scratch folder's private part, which the kernel never sees.
 
-- inside **bubblewrap** when ``bwrap`` is installed and works here (Debian's
-  ``bubblewrap``): the whole file system read-only, ``/tmp`` and the instructor's and other
-  submissions' folders replaced by empty ones, then the interpreter (its prefixes and every
-  link from ``sys.executable`` to the real binary) and the data bound back read-only
-  wherever they lie, so a course cloned into ``/tmp`` grades as anywhere else; only the
-  scratch folder writable, no network (its own network namespace; the grader talks to it
-  over Unix sockets in the scratch folder), its own PID namespace, killed with the grader;
-- otherwise, when the grader runs as root and the interpreter is readable by others, as
-  the unprivileged user ``nobody`` (it can then write nowhere but the scratch folder);
-  otherwise as the grader's own user: it could then
-  write wherever that user can, which :mod:`annslam_lib.course.grader` detects afterwards
-  (a hash of the course's files before and after) and undoes, and the README says so.
+**Isolation 'bwrap'** (the default, and the only one a class is graded with): the kernel is
+started by bubblewrap in a file system built from nothing: the system's programs and
+libraries (``/usr`` and its links, a few files of ``/etc``), the Python environment and the
+course's data, all read-only, the library snapshot and connection file read-only, the IPC
+folder writable, and size-limited memory folders for its working directory, its home,
+``/tmp`` and ``/dev/shm``. Nothing else exists there: not the course's checkout (its
+``.git`` and instructor notebooks), not the folders the grader names in ``hide`` (other
+submissions, the exchange, the gradebook). A folder the environment needs that holds a
+hidden one is rebuilt from its other entries. Its own PID, IPC, UTS and network namespaces
+(the grader talks to it over Unix sockets in the IPC folder), a new session, killed with
+the grader.
+
+Whoever starts the grader, the student's code holds no privilege
+(:mod:`annslam_lib.course.confine`): started as root, the kernel becomes a user of its own
+(:func:`free_id`: an id no account and no process has, so that sandboxes never share a
+process limit) with an empty capability set and bounding set; started by an ordinary user,
+bubblewrap maps that user into its own user namespace and drops every capability. In both
+cases ``no_new_privs`` and a seccomp filter refuse mounts, namespaces, ``ptrace`` and
+kernel loading, and the resource limits (CPU seconds, address space, file size, processes)
+are set before the drop, so they bind. The only other process in the sandbox is its PID 1,
+the launcher that started the kernel, with the same user, limits and filter.
+
+**Isolation 'none'** runs the kernel as the grader's own user, with the limits only: for a
+single trusted notebook on a laptop, never for a class (the grader says so in its report).
+Without a working bubblewrap, ``auto`` refuses with :class:`GradingEnvironmentError`,
+naming the cause and the fix.
 
 A kernel that cannot start raises :class:`KernelStartError` with what it wrote; the grader
 turns the first one of a submission (no student code has run yet) into a
-:class:`GradingEnvironmentError`, the machine's fault, never a score.
-
-In every case the kernel process has resource limits (``setrlimit``: CPU seconds, address
-space, largest file written, no core dumps), each execution a time-out, and the whole
-notebook a wall-clock deadline. A kernel that dies (``os._exit``, a signal, the CPU limit) is
-noticed within a fraction of a second and reported as such, not as a time-out; one that
-ignores the interrupt after its time-out is killed.
+:class:`GradingEnvironmentError`, the machine's fault, never a score. Each execution has a
+time-out and the whole notebook a wall-clock deadline. A kernel that dies (``os._exit``, a
+signal, the CPU limit) is noticed within a fraction of a second and reported as such, not
+as a time-out; one that ignores the interrupt after its time-out is killed.
 """
 from __future__ import annotations
 
@@ -44,31 +56,29 @@ from dataclasses import dataclass
 from pathlib import Path
 
 __all__ = ["Limits", "ExecResult", "Sandbox", "GradingEnvironmentError", "KernelStartError",
-           "bwrap_available", "bwrap_problem", "nobody_available", "interpreter_paths", "ISOLATIONS"]
+           "bwrap_available", "bwrap_problem", "interpreter_paths", "mount_plan", "ISOLATIONS",
+           "SANDBOX_IDS", "free_id", "NO_SANDBOX_WARNING"]
 
 LIB = Path(__file__).resolve().parents[1]          # the annslam_lib package
-ISOLATIONS = ("auto", "bwrap", "nobody", "none")
-NOBODY = 65534
+COURSE = LIB.parent                                # the course's checkout: never in a sandbox
+ISOLATIONS = ("auto", "bwrap", "none")
+# The user and group ids a sandbox started by root runs as: one per sandbox, that no account
+# names and no process uses, so that two sandboxes never share a process limit (it counts
+# per user) and nothing of the machine's own runs as the sandbox's user.
+SANDBOX_IDS = range(0x60000000, 0x60000000 + (1 << 24))
 _POLL_S = 0.1
+# What the kernel needs of the system, read-only; everything else of /etc stays out.
+SYSTEM = ("/usr", "/bin", "/sbin", "/lib", "/lib32", "/lib64", "/libx32")
+ETC = ("ld.so.cache", "ld.so.conf", "ld.so.conf.d", "passwd", "group", "nsswitch.conf",
+       "localtime", "timezone", "alternatives", "mime.types", "os-release")
+NO_SANDBOX_WARNING = ("UNISOLATED: the student's code ran with the grader's own rights "
+                      "(isolation 'none'); use it only for a trusted notebook")
 
-# Runs as the kernel's interpreter inside the sandbox: limits first, then the kernel itself.
-_LAUNCHER = r"""
-import json, os, resource, sys
-lim = json.loads(sys.argv[1])
-for name, soft, hard in (("RLIMIT_CPU", lim["cpu"], lim["cpu"] + 5),
-                         ("RLIMIT_AS", lim["mem"], lim["mem"]),
-                         ("RLIMIT_FSIZE", lim["fsize"], lim["fsize"]),
-                         ("RLIMIT_CORE", 0, 0), ("RLIMIT_NPROC", lim["nproc"], lim["nproc"])):
-    resource.setrlimit(getattr(resource, name), (soft, hard))
-if lim.get("uid") is not None:
-    os.setgroups([])
-    os.setgid(lim["uid"])
-    os.setuid(lim["uid"])
-# Inside a PID namespace the grader's pid means nothing: the kernel would think its parent
-# is gone and quit. Its lifetime is bound by the sandbox (--die-with-parent) or the grader.
-os.environ.pop("JPY_PARENT_PID", None)
-os.execv(sys.executable, [sys.executable, "-m", "ipykernel_launcher", *sys.argv[2:]])
-"""
+
+def _fix() -> str:
+    return ("install bubblewrap (Debian/Ubuntu: apt-get install bubblewrap) and, when the "
+            "grader does not run as root, allow unprivileged user namespaces; or, for a single "
+            "trusted notebook only, pass --isolation none")
 
 
 class GradingEnvironmentError(RuntimeError):
@@ -117,14 +127,15 @@ class ExecResult:
 
 
 def bwrap_available() -> str | None:
-    """Path of a working ``bwrap`` (tried once: user namespaces may be disabled), or None;
-    :func:`bwrap_problem` says why not."""
+    """Path of a ``bwrap`` that makes the sandbox here (tried once, exactly as a kernel is
+    started, the drop of privilege and the filter included), or None; :func:`bwrap_problem`
+    says why not."""
     exe, _ = _bwrap_probe()
     return exe
 
 
 def bwrap_problem() -> str:
-    """Why bubblewrap cannot be used here ('' when it can)."""
+    """Why the sandbox cannot be made here, with the fix ('' when it can)."""
     return _bwrap_probe()[1]
 
 
@@ -132,64 +143,263 @@ def bwrap_problem() -> str:
 def _bwrap_probe() -> tuple[str | None, str]:
     exe = shutil.which("bwrap")
     if exe is None:
-        return None, "bwrap is not installed (Debian's package bubblewrap)"
-    try:
-        r = subprocess.run([exe, "--ro-bind", "/", "/", "--dev", "/dev", "--proc", "/proc",
-                            "--unshare-net", "--unshare-pid", "--die-with-parent", "true"],
-                           capture_output=True, timeout=20)
-    except (OSError, subprocess.TimeoutExpired) as e:
-        return None, f"{exe} could not be run: {e}"
+        return None, f"bubblewrap (bwrap) is not installed: {_fix()}"
+    with tempfile.TemporaryDirectory(prefix="annslam-probe-") as tmp:
+        lib = Path(tmp) / "lib"
+        (lib / "course").mkdir(parents=True)
+        shutil.copyfile(Path(__file__).with_name("confine.py"), lib / "course" / "confine.py")
+        os.chmod(tmp, 0o755)
+        for p in (lib, lib / "course"):
+            os.chmod(p, 0o755)
+        os.chmod(lib / "course" / "confine.py", 0o644)
+        cfg = {**_limits_config(Limits()), "check": True}
+        args = [exe, *_namespace_args(), *_bind_args(mount_plan(
+            _needed_paths(), _optional_paths(), [COURSE], first=_memory_folders(1 << 20),
+            extra=[("ro-bind", lib, lib)])),
+            "--", sys.executable, "-I", str(lib / "course" / "confine.py"), json.dumps(cfg)]
+        try:
+            r = subprocess.run(args, capture_output=True, timeout=60, env=_base_env())
+        except (OSError, subprocess.TimeoutExpired) as e:
+            return None, f"{exe} could not be run: {e}"
     if r.returncode != 0:
-        last = (r.stderr.decode(errors="replace").strip().splitlines() or ["?"])[-1]
-        return None, (f"{exe} is installed but may not create a sandbox here (exit code "
-                      f"{r.returncode}: {last[:200]}); user namespaces may be disabled")
+        said = r.stderr.decode(errors="replace").strip().splitlines() or ["?"]
+        return None, (f"{exe} is installed but cannot make the sandbox here (exit code "
+                      f"{r.returncode}: {said[-1][:300]}); unprivileged user namespaces may be "
+                      f"disabled, or the Python environment is not readable by the sandbox's "
+                      f"user (a user id of its own when the grader is root): {_fix()}")
     return exe, ""
 
 
-def interpreter_paths() -> list[Path]:
-    """Every folder the kernel's interpreter needs: the environment's prefixes, the folders
-    of each link from ``sys.executable`` to the real binary (a venv's python is a link to
-    its base interpreter, which may lie in a temporary folder too), and the folders on
-    ``sys.path`` (a ``.pth`` line may add one outside the environment). Bound read-only,
-    they are what the kernel would see anyway were they not under ``/tmp``."""
-    found = [Path(p) for p in {sys.prefix, sys.base_prefix, sys.exec_prefix,
-                                sys.base_exec_prefix}]
-    found += [Path(p) for p in sys.path if p and Path(p).is_dir()]
-    exe = Path(sys.executable)
+def _memory_folders(size: int) -> list[tuple]:
+    return [("tmpfs", Path("/tmp"), size, "1777"), ("tmpfs", Path("/dev/shm"), size, "1777")]
+
+
+def free_id() -> int:
+    """A user id of :data:`SANDBOX_IDS` that no account names, no group has and no process
+    of this machine runs as (used for the group id too)."""
+    import grp
+    import pwd
+    import random
+
+    used = set()
+    for d in os.listdir("/proc"):
+        if d.isdigit():
+            with contextlib.suppress(OSError):
+                st = os.stat(f"/proc/{d}")
+                used.add(st.st_uid)
+    rng = random.SystemRandom()
+    for _ in range(100):
+        n = rng.choice(SANDBOX_IDS)
+        if n in used:
+            continue
+        try:
+            pwd.getpwuid(n)
+            continue
+        except KeyError:
+            pass
+        try:
+            grp.getgrgid(n)
+            continue
+        except KeyError:
+            return n
+    raise GradingEnvironmentError("no free user id for the sandbox in "
+                                  f"{SANDBOX_IDS.start}-{SANDBOX_IDS.stop - 1}")
+
+
+def _limits_config(limits: Limits, uid: int | None = None) -> dict:
+    uid = free_id() if uid is None else uid
+    return {"cpu": int(limits.cpu_seconds), "mem": int(limits.memory_bytes),
+            "fsize": int(limits.file_bytes), "nproc": int(limits.processes),
+            "uid": uid, "gid": uid, "confine": True}
+
+
+def _base_env() -> dict:
+    keep = ("PATH", "LANG", "LC_ALL", "TZ")
+    return {k: os.environ[k] for k in keep if k in os.environ}
+
+
+def _namespace_args() -> list[str]:
+    """bubblewrap's namespaces and session. The sandbox's PID 1 is the course's launcher
+    (:mod:`~annslam_lib.course.confine`), not bubblewrap's: no process without the drop and
+    the filter whose memory the kernel could reach as the same user. Root: bubblewrap's
+    own privileged mode, and the launcher drops to a user id of its own (:func:`free_id`):
+    a user namespace created by root would map the sandbox's user onto uid 0 outside, which
+    owns root's files and is exempt from the process limit. Anyone else: a user namespace,
+    no capability."""
+    args = ["--unshare-pid", "--as-pid-1", "--unshare-ipc", "--unshare-net", "--unshare-uts",
+            "--unshare-cgroup-try", "--new-session", "--die-with-parent",
+            "--hostname", "sandbox", "--proc", "/proc", "--dev", "/dev"]
+    if os.geteuid() != 0:
+        args += ["--unshare-user", "--cap-drop", "ALL"]
+    return args
+
+
+def _chain(path: Path) -> list[Path]:
+    """``path`` and each link it leads through, hop by hop (a venv's python links to its
+    base interpreter, which may link on)."""
+    out = [path]
     for _ in range(40):                           # follow the chain of links, hop by hop
-        found.append(exe.parent)
-        if not exe.is_symlink():
+        if not path.is_symlink():
             break
-        exe = exe.parent / os.readlink(exe)
+        path = path.parent / os.readlink(path)
+        out.append(path)
+    return out
+
+
+def _needed_paths() -> list[Path]:
+    """What the kernel cannot run without: the system's folders, the environment's
+    prefixes, every folder on the way from ``sys.executable`` to the real binary (a venv's
+    python links to its base interpreter), and the course's data."""
+    from ..data import fetch
+
+    found = [Path(p) for p in SYSTEM] + [Path("/etc") / n for n in ETC]
+    found += [Path(p) for p in {sys.prefix, sys.base_prefix, sys.exec_prefix,
+                                 sys.base_exec_prefix}]
+    found += [p.parent for p in _chain(Path(sys.executable))]
     found.append(Path(os.path.realpath(sys.executable)).parent)
+    found.append(fetch.data_dir())
+    return [p.absolute() for p in found if os.path.lexists(p)]
+
+
+def _optional_paths() -> list[Path]:
+    """Folders on ``sys.path`` (a ``.pth`` line may add one outside the environment);
+    bound only when they hold nothing hidden (:func:`mount_plan`)."""
+    return [Path(p).absolute() for p in sys.path if p and Path(p).is_dir()]
+
+
+def interpreter_paths() -> list[Path]:
+    """Every folder the kernel's interpreter may need (:func:`_needed_paths` but the system
+    and the data, and the folders on ``sys.path``), as given and resolved."""
+    from ..data import fetch
+
+    skip = {Path(p) for p in SYSTEM} | {fetch.data_dir().absolute()}
+    found = [p for p in _needed_paths() if p not in skip and p.parent != Path("/etc")]
+    found += _optional_paths()
     out = []
     for p in found:
-        for q in (p.absolute(), p.resolve()):
+        for q in (p, p.resolve()):
             if q.exists() and q not in out:
                 out.append(q)
     return out
 
 
-@functools.lru_cache(maxsize=1)
-def nobody_available() -> str | None:
-    """None if this interpreter runs as the user nobody here (needs root, and an
-    interpreter nobody may read: not one under /root), else why not."""
-    if os.geteuid() != 0:
-        return "the grader does not run as root"
+def _within(p: Path, folder: Path) -> bool:
+    return p == folder or folder in p.parents
 
-    def drop():
-        os.setgroups([])
-        os.setgid(NOBODY)
-        os.setuid(NOBODY)
-    try:
-        r = subprocess.run([sys.executable, "-c", "import numpy, ipykernel"], preexec_fn=drop,
-                           capture_output=True, timeout=60, cwd="/")
-    except (OSError, subprocess.SubprocessError) as e:
-        return str(e)
-    if r.returncode != 0:
-        last = (r.stderr.decode(errors="replace").strip().splitlines() or ["?"])[-1]
-        return f"{sys.executable} cannot be run as nobody ({last[:160]})"
-    return None
+
+def mount_plan(needed, optional, hidden, *, first=(), extra=()) -> list[tuple]:
+    """The sandbox's file system as a list of steps, in order: ('dir', path), ('symlink',
+    target, path), ('ro-bind', source, dest), ('bind', source, dest), ('tmpfs', path,
+    size in bytes, mode).
+
+    ``needed`` paths are reachable in the sandbox at the same place as on this machine (the
+    links on their way recreated as links, the folders they lead to bound read-only);
+    ``optional`` ones too, unless they are, hold or lie in a ``hidden`` folder. A needed
+    folder that holds a hidden one is rebuilt from its other entries, so the hidden folder
+    is not there at all (nothing to unmount); a needed path inside a hidden folder is bound
+    alone. ``first`` steps (memory folders such as ``/tmp``) come before the binds, which
+    may lie inside them; ``extra`` steps (the scratch folder's parts) come last."""
+    hidden = [Path(os.path.realpath(h)) for h in hidden]
+    steps: list[tuple] = []
+    links: dict[Path, str] = {}
+    real_needed: list[Path] = []
+
+    def reach(p: Path) -> Path:
+        """Record the links on the way to ``p``; its real path."""
+        cur = Path("/")
+        parts = p.parts[1:]
+        for i, part in enumerate(parts):
+            nxt = cur / part
+            if nxt.is_symlink():
+                links.setdefault(nxt, os.readlink(nxt))
+                real = Path(os.path.realpath(nxt))
+                return reach(real.joinpath(*parts[i + 1:]))
+            cur = nxt
+        return cur
+
+    for p in needed:
+        real_needed.append(reach(Path(p)))
+    for p in optional:
+        real = Path(os.path.realpath(p))
+        if any(_within(real, h) or _within(h, real) for h in hidden):
+            continue
+        reach(Path(p))
+        real_needed.append(real)
+    binds: list[Path] = []
+
+    def covered(r: Path) -> bool:               # by a bind, and not cut out of it as hidden
+        return any(_within(r, b) and not any(_within(r, h) and _within(h, b) for h in hidden)
+                   for b in binds)
+
+    for r in sorted(set(real_needed), key=lambda q: (len(q.parts), str(q))):
+        if r.exists() and not covered(r):
+            binds.append(r)
+    made: set[Path] = set()
+
+    def ensure_dir(d: Path) -> None:
+        for a in [*reversed(d.parents), d]:
+            if a != Path("/") and a not in made and a not in links:
+                steps.append(("dir", a))
+                made.add(a)
+
+    def bind(r: Path) -> None:
+        inner = [h for h in hidden if _within(h, r)]
+        if not inner:
+            ensure_dir(r.parent)
+            steps.append(("ro-bind", r, r))
+            made.add(r)
+            return
+        if r in inner or not r.is_dir():
+            return                                   # the path itself is hidden
+        ensure_dir(r)
+        for child in sorted(r.iterdir()):
+            if any(child == h for h in inner):
+                continue
+            if child.is_symlink():
+                steps.append(("symlink", os.readlink(child), child))
+                made.add(child)
+            elif any(_within(h, child) for h in inner):
+                bind(child)
+            else:
+                steps.append(("ro-bind", child, child))
+                made.add(child)
+
+    for step in first:
+        ensure_dir(_dest(step).parent)
+        steps.append(step)
+        made.add(_dest(step))
+    for link, target in sorted(links.items(), key=lambda kv: len(kv[0].parts)):
+        if not covered(link):
+            ensure_dir(link.parent)
+            steps.append(("symlink", target, link))
+            made.add(link)
+    for r in binds:
+        bind(r)
+    for step in extra:
+        ensure_dir(_dest(step).parent)
+        steps.append(step)
+    return steps
+
+
+def _dest(step) -> Path:
+    return Path(step[1] if step[0] in ("dir", "tmpfs") else step[2])
+
+
+def _bind_args(steps) -> list[str]:
+    args = []
+    for step in steps:
+        kind = step[0]
+        if kind == "dir":
+            args += ["--perms", "0755", "--dir", str(step[1])]
+        elif kind == "symlink":
+            args += ["--symlink", str(step[1]), str(step[2])]
+        elif kind in ("ro-bind", "bind"):
+            args += [f"--{kind}", str(step[1]), str(step[2])]
+        elif kind == "tmpfs":                        # ('tmpfs', path, bytes, mode)
+            args += ["--perms", step[3], "--size", str(int(step[2])), "--tmpfs", str(step[1])]
+        else:
+            raise ValueError(f"unknown mount step {step!r}")
+    return args
 
 
 def _describe_exit(code: int | None) -> str:
@@ -207,89 +417,89 @@ def _describe_exit(code: int | None) -> str:
 class Sandbox:
     """A scratch folder and the kernel that runs one submission (a context manager).
 
-    ``isolation``: 'auto' (bubblewrap if it works here, else 'nobody' when root, else
-    'none'), or one of those explicitly. ``hide``: folders the kernel must not see (the
-    instructor's notebooks, other submissions). ``files``: {name: bytes} written into the
-    kernel's working directory."""
+    ``isolation``: 'auto' or 'bwrap' (the sandbox of the module docstring; raises
+    :class:`GradingEnvironmentError` with the cause and the fix where it cannot be made),
+    or 'none'. ``hide``: folders that must not exist in the sandbox besides the course's
+    checkout (the instructor's notebooks, other submissions, the gradebook)."""
 
-    def __init__(self, limits: Limits = Limits(), *, isolation: str = "auto", hide=(),
-                 files: dict | None = None) -> None:
+    def __init__(self, limits: Limits = Limits(), *, isolation: str = "auto",
+                 hide=()) -> None:
         if isolation not in ISOLATIONS:
             raise ValueError(f"isolation must be one of {ISOLATIONS}, got {isolation!r}")
-        if isolation == "auto":
-            isolation = ("bwrap" if bwrap_available() else
-                         "nobody" if nobody_available() is None else "none")
-        if isolation == "bwrap" and not bwrap_available():
-            raise GradingEnvironmentError(f"isolation 'bwrap' is not possible here: "
-                                          f"{bwrap_problem()}")
-        if isolation == "nobody" and (why := nobody_available()) is not None:
-            raise GradingEnvironmentError(f"isolation 'nobody' is not possible here: {why}")
+        if isolation in ("auto", "bwrap"):
+            if not bwrap_available():
+                raise GradingEnvironmentError(f"the grading sandbox cannot be made here: "
+                                              f"{bwrap_problem()}")
+            isolation = "bwrap"
         self.isolation = isolation
         self.limits = limits
         self.hide = [Path(h).resolve() for h in hide]
-        self.root = Path(tempfile.mkdtemp(prefix="annslam-grade-"))
+        self.root = Path(tempfile.mkdtemp(prefix="annslam-grade-"))   # mode 700
+        self.lib = self.root / "lib"
+        self.conn = self.root / "conn"          # connection files: written here, read inside
+        self.ipc = self.root / "ipc"            # the kernel's sockets: its only writable folder
         self.work = self.root / "work"
         self.home = self.root / "home"
-        self.ipc = self.root / "ipc"
-        for d in (self.work, self.home, self.ipc, self.root / "kernels" / "sandbox"):
+        self.private = self.root / "private"    # kernelspec and logs: never in the sandbox
+        for d in (self.conn, self.ipc, self.work, self.home, self.private / "kernels" / "sandbox"):
             d.mkdir(parents=True)
-        for name, data in (files or {}).items():
-            (self.work / name).write_bytes(data)
-        shutil.copytree(LIB, self.root / "lib" / LIB.name,
-                        ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
-        if isolation == "nobody":
-            for p in [self.root, *self.root.rglob("*")]:
-                os.chown(p, NOBODY, NOBODY, follow_symlinks=False)
+        shutil.copytree(LIB, self.lib / LIB.name,
+                        ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.nb[ic]"))
+        for p in [self.lib, *self.lib.rglob("*")]:       # readable, not writable, by the kernel
+            os.chmod(p, 0o755 if p.is_dir() else 0o644, follow_symlinks=False)
+        os.chmod(self.conn, 0o755)      # bound into the sandbox; the scratch folder stays 700
+        self.uid = free_id() if self.isolation == "bwrap" and os.geteuid() == 0 else None
+        if self.uid is not None:
+            for d in (self.ipc, self.work, self.home):
+                os.chown(d, self.uid, self.uid)
         self._write_kernelspec()
         self.km = self.kc = None
+        self._lifeline: int | None = None
         self.deadline = time.monotonic() + limits.deadline
         self.kernels_started = 0
         self.dead_reason = ""
 
     # ------------------------------------------------------------------ kernel life
+    def mount_steps(self) -> list[tuple]:
+        """The sandbox's file system (:func:`mount_plan`): the system, the environment and
+        the data read-only; the snapshot and the connection files read-only, the IPC folder
+        writable; memory folders (each at most the file-size limit) for the working
+        directory, the home, ``/tmp`` and ``/dev/shm``."""
+        size = self.limits.file_bytes
+        first = _memory_folders(size)
+        extra = [("ro-bind", self.lib, self.lib), ("ro-bind", self.conn, self.conn),
+                 ("bind", self.ipc, self.ipc), ("tmpfs", self.work, size, "0777"),
+                 ("tmpfs", self.home, size, "0777")]
+        hidden = [COURSE, *self.hide]
+        return mount_plan(_needed_paths(), _optional_paths(), hidden, first=first, extra=extra)
+
     def _prefix(self) -> list[str]:
-        """bubblewrap's arguments: everything read-only, /tmp, /dev/shm and the hidden
-        folders empty, the interpreter and the data bound back read-only wherever they lie
-        (under /tmp too), and the scratch folder writable. Mounts are applied shallow
-        before deep, so a folder inside a hidden one stays visible if the kernel needs it,
-        and a hidden folder inside (or equal to) a needed one stays hidden."""
         if self.isolation != "bwrap":
             return []
-        from ..data import fetch
-        data = fetch.data_dir()
-        mounts = [("--tmpfs", Path("/tmp")), ("--tmpfs", Path("/dev/shm"))]
-        mounts += [("--ro-bind", p) for p in [*interpreter_paths(), data.absolute(),
-                                              data.resolve()] if p.exists()]
-        mounts += [("--tmpfs", h) for h in self.hide if h.exists()]
-        # shallow first (stable): at equal depth a hidden folder comes last and stays hidden
-        mounts.sort(key=lambda m: len(m[1].parts))
-        args = [bwrap_available(), "--ro-bind", "/", "/", "--dev", "/dev", "--proc", "/proc"]
-        for kind, p in mounts:
-            args += [kind, str(p)] if kind == "--tmpfs" else [kind, str(p), str(p)]
-        args += ["--bind", str(self.root), str(self.root), "--unshare-net", "--unshare-pid",
-                 "--unshare-ipc", "--unshare-uts", "--die-with-parent", "--chdir",
-                 str(self.work), "--"]
-        return args
+        return [bwrap_available(), *_namespace_args(), *_bind_args(self.mount_steps()),
+                "--chdir", str(self.work), "--"]
 
     def _write_kernelspec(self) -> None:
-        lim = {"cpu": int(self.limits.cpu_seconds), "mem": int(self.limits.memory_bytes),
-               "fsize": int(self.limits.file_bytes), "nproc": int(self.limits.processes),
-               "uid": NOBODY if self.isolation == "nobody" else None}
-        argv = [*self._prefix(), sys.executable, "-c", _LAUNCHER, json.dumps(lim), "-f",
-                "{connection_file}"]
+        cfg = _limits_config(self.limits, self.uid or 0)
+        cfg["confine"] = cfg["reaper"] = self.isolation == "bwrap"
+        argv = [*self._prefix(), sys.executable, "-I", str(self.lib / LIB.name / "course" /
+                                                         "confine.py"),
+                json.dumps(cfg), "-f", "{connection_file}"]
         spec = {"argv": argv, "display_name": "annslam grading sandbox", "language": "python",
                 "interrupt_mode": "message"}
-        (self.root / "kernels" / "sandbox" / "kernel.json").write_text(json.dumps(spec))
+        (self.private / "kernels" / "sandbox" / "kernel.json").write_text(json.dumps(spec))
 
     def _env(self) -> dict:
-        keep = ("PATH", "LANG", "LC_ALL", "ANNSLAM_DATA", "ANNSLAM_DATA_URL", "TZ")
-        env = {k: os.environ[k] for k in keep if k in os.environ}
+        env = _base_env()
+        if "ANNSLAM_DATA_URL" in os.environ:
+            env["ANNSLAM_DATA_URL"] = os.environ["ANNSLAM_DATA_URL"]
         from ..data import fetch                  # the kernel reads the data where we do
         env.update(ANNSLAM_DATA=str(fetch.data_dir()), HOME=str(self.home),
-                   PYTHONPATH=str(self.root / "lib"), MPLCONFIGDIR=str(self.home / ".mpl"),
+                   PYTHONPATH=str(self.lib), MPLCONFIGDIR=str(self.home / ".mpl"),
                    IPYTHONDIR=str(self.home / ".ipython"), JUPYTER_RUNTIME_DIR=str(self.ipc),
-                   PYTHONDONTWRITEBYTECODE="1", OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1",
-                   MKL_NUM_THREADS="1", PYTHONHASHSEED="0", MPLBACKEND="agg",
+                   PYTHONDONTWRITEBYTECODE="1", PYTHONNOUSERSITE="1", OMP_NUM_THREADS="1",
+                   OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1", PYTHONHASHSEED="0",
+                   MPLBACKEND="agg", USER="student", LOGNAME="student",
                    ANNSLAM_CACHE="off",       # a grade is computed, never read from a pickle
                    # nor run through machine code compiled and cached by another process:
                    # the numpy gating (slam.compiled), numba's cache (if student code uses
@@ -303,20 +513,25 @@ class Sandbox:
         from jupyter_client.manager import KernelManager
 
         self.stop()
-        ksm = KernelSpecManager(kernel_dirs=[str(self.root / "kernels")])
+        ksm = KernelSpecManager(kernel_dirs=[str(self.private / "kernels")])
         km = KernelManager(kernel_name="sandbox", kernel_spec_manager=ksm, transport="ipc",
                            ip=str(self.ipc / f"k{self.kernels_started}"))
-        km.connection_file = str(self.ipc / f"kernel-{self.kernels_started}.json")
+        km.connection_file = str(self.conn / f"kernel-{self.kernels_started}.json")
         remaining = self.remaining()
         if remaining <= 0:
             raise TimeoutError("the notebook's grading deadline passed")
-        log = open(self.root / f"kernel-{self.kernels_started}.log", "wb")
+        km.write_connection_file()
+        os.chmod(km.connection_file, 0o644)       # the kernel's user reads it; nobody else
+        log = open(self.private / f"kernel-{self.kernels_started}.log", "wb")   # can reach it
+        env = self._env()
+        life_r, self._lifeline = os.pipe()       # the sandbox ends when this end is closed
+        env["ANNSLAM_LIFELINE"] = str(life_r)
         try:
-            km.start_kernel(cwd=str(self.work), env=self._env(), stdout=log, stderr=log)
+            km.start_kernel(cwd=str(self.work), env=env, stdout=log, stderr=log,
+                            pass_fds=(life_r,))
         finally:
             log.close()
-        if self.isolation == "nobody":
-            os.chmod(km.connection_file, 0o644)
+            os.close(life_r)
         kc = km.client()
         kc.start_channels()
         try:
@@ -337,12 +552,16 @@ class Sandbox:
     def kernel_log(self, k: int, lines: int = 4) -> str:
         """The last lines kernel number ``k`` wrote to its stdout and stderr."""
         try:
-            text = (self.root / f"kernel-{k}.log").read_text(errors="replace")
+            text = (self.private / f"kernel-{k}.log").read_text(errors="replace")
         except OSError:
             return ""
         return " | ".join(x.strip() for x in text.strip().splitlines()[-lines:] if x.strip())
 
     def stop(self) -> None:
+        if self._lifeline is not None:
+            with contextlib.suppress(OSError):
+                os.close(self._lifeline)
+            self._lifeline = None
         if self.kc is not None:
             with contextlib.suppress(Exception):
                 self.kc.stop_channels()

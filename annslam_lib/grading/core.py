@@ -18,6 +18,8 @@ import contextlib
 import contextvars
 import functools
 import sys
+import threading
+import types
 from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
@@ -93,7 +95,8 @@ def allowing_library_calls():
         _ALLOWED.reset(token)
 
 
-def _code_of(path: str):
+def _function_of(path: str):
+    """The library function 'module:qualname' (None if it is not a Python function)."""
     import importlib
 
     mod, _, qual = path.partition(":")
@@ -103,32 +106,70 @@ def _code_of(path: str):
             obj = getattr(obj, part)
     except (ImportError, AttributeError):
         return None
-    return getattr(obj, "__code__", None)
+    return obj if isinstance(getattr(obj, "__code__", None), types.CodeType) else None
+
+
+class _Tripwire:
+    """For the life of a block, a library function's code is replaced by one that records
+    the call and then runs the original: every reference to the function object (an alias,
+    a ``getattr``, a helper, another thread) goes through it."""
+
+    def __init__(self, fn, path: str, record) -> None:
+        self.fn, self.code = fn, fn.__code__
+        if self.code.co_freevars:           # a closure's code cannot be swapped: profile only
+            self.fn = None
+            return
+        original = types.FunctionType(self.code, fn.__globals__, fn.__name__, fn.__defaults__)
+        original.__kwdefaults__ = fn.__kwdefaults__
+        self.key = f"__annslam_tripwire_{id(fn):x}__"
+        fn.__globals__[self.key] = (record, original, path)
+        ns: dict = {}
+        exec(compile(f"def {fn.__name__}(*args, **kwargs):\n"
+                     f"    record, original, path = {self.key}\n"
+                     "    record(path)\n"
+                     "    return original(*args, **kwargs)\n", "<call monitor>", "exec"), ns)
+        fn.__code__ = ns[fn.__name__].__code__
+
+    def remove(self) -> None:
+        if self.fn is not None:
+            self.fn.__code__ = self.code
+            self.fn.__globals__.pop(self.key, None)
 
 
 @contextlib.contextmanager
 def watch_calls(paths: Sequence[str]):
     """Record, in the yielded list, which of the functions ``paths`` ('module:qualname')
-    are called inside the block (``sys.setprofile``); a monitor removed by the code inside
-    is recorded too."""
-    watched = {c: p for p in paths if (c := _code_of(p)) is not None}
+    are called inside the block, from any thread: a profile function on this thread and on
+    every thread started in the block (``sys.setprofile``, ``threading.setprofile``), and a
+    tripwire in each watched function itself (:class:`_Tripwire`), which also sees calls
+    from threads started before the block. A monitor removed by the code inside is recorded
+    too."""
+    functions = {p: f for p in paths if (f := _function_of(p)) is not None}
     hits: list[str] = []
-    if not watched:
+    if not functions:
         yield hits
         return
+    watched = {f.__code__: p for p, f in functions.items()}
 
     def monitor(frame, event, arg):
         if event == "call" and frame.f_code in watched:
             hits.append(watched[frame.f_code])
 
-    previous = sys.getprofile()
-    sys.setprofile(monitor)
+    previous, previous_threads = sys.getprofile(), threading.getprofile()
+    wires = []
     try:
+        for p, f in functions.items():
+            wires.append(_Tripwire(f, p, hits.append))
+        sys.setprofile(monitor)
+        threading.setprofile(monitor)
         yield hits
     finally:
         if sys.getprofile() is not monitor:
             hits.append("<the call monitor was removed>")
         sys.setprofile(previous)
+        threading.setprofile(previous_threads)
+        for w in wires:
+            w.remove()
 
 
 def forbidden_message(name: str, hits: Sequence[str]) -> str:
