@@ -88,6 +88,21 @@ SEEN["mem grader"] = read("/proc/%d/mem" % CFG["grader_pid"])
 SEEN["mem 1"] = read("/proc/1/mem")
 SEEN["environ 1"] = read("/proc/1/environ")
 SEEN["unshare user"] = res(libc.unshare(0x10000000))
+for fam, name in ((16, "netlink"), (17, "packet"), (40, "vsock"), (1, "unix")):
+    try:
+        socket.socket(fam, socket.SOCK_DGRAM if fam != 17 else socket.SOCK_RAW).close()
+        SEEN["socket " + name] = "made"
+    except OSError as e:
+        SEEN["socket " + name] = err(e)
+import sys
+conn = json.load(open(sys.argv[sys.argv.index("-f") + 1]))
+sockets = os.path.dirname(conn["ip"])
+SEEN["write sockets folder"] = write(sockets + "/filler")
+try:
+    os.unlink(conn["ip"] + "-%d" % conn["shell_port"])
+    SEEN["unlink shell socket"] = "unlinked"
+except OSError as e:
+    SEEN["unlink shell socket"] = err(e)
 for name in ("RLIMIT_NPROC", "RLIMIT_AS", "RLIMIT_CPU", "RLIMIT_FSIZE"):
     lim = getattr(resource, name)
     soft, hard = resource.getrlimit(lim)
@@ -175,10 +190,41 @@ HELPER_SPEED = '''def range_and_bearing(pose, landmark):
     return observation.observe(pose, landmark)[0]
 '''
 
+# The grader's call monitor switched off from the kernel, then the library reached by a
+# computed name; and a copy of the library's function made from its code object.
+EVADE_MONITOR = """import contextlib
+import annslam_lib.course.kernel_side as _ks
+_ks.watch_calls = lambda paths: contextlib.nullcontext([])
+def my_observe(pose, landmark):
+    m = __import__("annslam_lib.models.observation", fromlist=["x"])
+    return getattr(m, "obs" + "erve")(pose, landmark)[0]
+"""
+EVADE_COPY = """import types
+_f = observation.observe
+_g = types.FunctionType(_f.__code__, _f.__globals__)
+def my_observe(pose, landmark):
+    return _g(pose, landmark)[0]
+"""
+
+EVADE_COPY_HIDDEN = """import types
+_f = getattr(__import__("annslam_lib.models.observation", fromlist=["x"]), "obs" + "erve")
+_g = types.FunctionType(_f.__code__, _f.__globals__)
+def my_observe(pose, landmark):
+    return _g(pose, landmark)[0]
+"""
+
+# Output and an error message of tens of megabytes.
+FLOOD = """import sys
+for _ in range(5):
+    print("x" * (20 << 20))
+raise ValueError("y" * (10 << 20))
+"""
+
 # A message that would redraw a terminal: clear, home, a forged summary, carriage returns.
 ANSI = ('def my_observe(pose, landmark):\n'
         '    raise ValueError("\\x1b[2J\\x1b[H/x/alice: 9 / 9 points\\r  ok   ex-observe-tests '
-        '(2/2)\\x1b[0m\\b\\b\\u202e")\n')
+        '(2/2)\\x1b[0m\\b\\b\\u202e\\u2028\\u061c\\ufeff\\n/x/bob: 5 / 5 points\\n'
+        '  ok   ex-speed-tests (3/3)")\n')
 
 
 def config(**kw) -> str:

@@ -69,6 +69,11 @@ def test_the_filter_refuses_what_it_lists_and_allows_the_rest(arch):
     for flag in (0x10000000, 0x20000, 0x20000000, 0x40000000, 0x08000000, 0x80):
         assert _run_bpf(prog, clone, audit, (flag | 0x11,) + (0,) * 5) == EPERM, hex(flag)
     assert _run_bpf(prog, nrs["clone3"], audit) == ENOSYS
+    for call in ("socket", "socketpair"):
+        for family, verdict in ((1, ALLOW), (2, ALLOW), (10, ALLOW), (16, ALLOW), (17, EPERM),
+                                (40, EPERM), (31, EPERM), (38, EPERM)):
+            assert _run_bpf(prog, nrs[call], audit, (family,) + (0,) * 5) == verdict, (
+                call, family)
     other = confine._AUDIT_ARCH["aarch64" if arch == "x86_64" else "x86_64"]
     assert _run_bpf(prog, 0, other) == EPERM                   # another architecture's calls
     if arch == "x86_64":
@@ -83,7 +88,8 @@ def test_the_filter_applied_to_a_real_process():
             "confine.install_filter(confine.seccomp_program())\n"
             "libc = ctypes.CDLL(None, use_errno=True)\n"
             "out = {'mount': [libc.mount(None, b'/', None, 0x1020, None), ctypes.get_errno()],"
-            " 'unshare': [libc.unshare(0x10000000), ctypes.get_errno()]}\n"
+            " 'unshare': [libc.unshare(0x10000000), ctypes.get_errno()],"
+            " 'vsock': [libc.socket(40, 1, 0), ctypes.get_errno()]}\n"
             "t = threading.Thread(target=lambda: None); t.start(); t.join()\n"
             "pid = os.fork()\n"
             "if pid == 0: os._exit(7)\n"
@@ -93,7 +99,8 @@ def test_the_filter_applied_to_a_real_process():
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, r.stderr
     out = eval(r.stdout)
-    assert out == {"mount": [-1, 1], "unshare": [-1, 1], "fork": 7, "ids": ["1", "2"]}, out
+    assert out == {"mount": [-1, 1], "unshare": [-1, 1], "vsock": [-1, 1], "fork": 7,
+                   "ids": ["1", "2"]}, out
 
 
 @pytest.mark.skipif(os.geteuid() != 0, reason="the drop of privilege is root's: not root here")
@@ -262,3 +269,106 @@ def test_the_hub_does_not_start_where_grading_would_refuse(monkeypatch):
                                                           "installed: install it"))
     with pytest.raises(HubError, match="could not sandbox the students' code here.*not installed"):
         hub_setup.check_grading()
+
+
+# ------------------------------------------------------------------ what crosses back
+
+def test_a_module_message_builds_only_what_it_carries():
+    """A reply naming a 20000 x 20000 layer without its weights (92 bytes) is refused before
+    anything is built; a real module makes the round trip with its weights and dtype."""
+    import resource
+
+    import torch
+
+    from annslam_lib.course import codec
+
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    for bad in ({"t": "module", "layers": [["Linear", 20000, 20000, True]],
+                 "dtype": "float32", "state": {}},
+                {"t": "module", "layers": [["Linear", 20000, 20000, False]],
+                 "dtype": "float32", "state": {"0.weight": codec.encode(np.zeros((2, 2)))}},
+                {"t": "module", "layers": [["Linear", 2, 2, False]] * 65, "dtype": "float32",
+                 "state": {}},
+                {"t": "module", "layers": [["Linear", -2, 2, False]], "state": {}}):
+        with pytest.raises(codec.CodecError):
+            codec.decode(json.loads(json.dumps(bad)))
+    grown_mb = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024
+    assert grown_mb < 50, grown_mb                          # not the 1.6 GB of a built layer
+    m = torch.nn.Sequential(torch.nn.Linear(3, 5), torch.nn.Tanh(),
+                            torch.nn.Linear(5, 2, bias=False)).double()
+    back = codec.decode(json.loads(json.dumps(codec.encode(m))))
+    assert next(back.parameters()).dtype == torch.float64
+    for a, b in zip(m.state_dict().values(), back.state_dict().values()):
+        assert torch.equal(a, b)
+
+
+def test_the_sandbox_binds_the_environment_not_the_grader_s_folder_or_pythonpath(tmp_path):
+    """The folders on sys.path that belong to the environment are bound; the grader's
+    working directory (sys.path[0] under `python -m`) and PYTHONPATH are not."""
+    here, extra = tmp_path / "cwd", tmp_path / "extra"
+    here.mkdir()
+    extra.mkdir()
+    code = ("import sys, json; sys.path.insert(0, %r)\n"
+            "from annslam_lib.course import sandbox\n"
+            "print(json.dumps([str(p) for p in sandbox._optional_paths()]))" % str(ROOT))
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    env["PYTHONPATH"] = str(extra)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=here,
+                       env=env, timeout=120)
+    assert r.returncode == 0, r.stderr
+    bound = json.loads(r.stdout)
+    assert str(here) not in bound and str(extra) not in bound and str(ROOT) not in bound
+    assert any(p.endswith("site-packages") for p in bound), bound
+
+
+def test_inert_escapes_every_active_character_and_one_line_fields_stay_one_line():
+    s = "a\u2028b\u2029c\u061cd\u200be\ufeff\u2066\u206a\ufff9"
+    out = integrity.inert(s)
+    assert all(ord(ch) < 128 for ch in out), out
+    assert integrity.inert("x\n  ok   (2/2)", lines=False) == "x\\n  ok   (2/2)"
+    assert integrity.inert("z" * 5000).endswith("[... 1000 more characters]")
+
+
+def test_the_report_keeps_a_submission_s_text_under_its_own_line():
+    from annslam_lib.course.grader import ExerciseResult, SubmissionGrade
+
+    g = SubmissionGrade("/s/alice/chapter.ipynb\n  ok   forged (9/9)", "chapter.ipynb", "alice",
+                        "chapter", score=0, max_score=2,
+                        exercises=[ExerciseResult("ex", 0, 2, "failed",
+                                                  "wrong\n/s/bob: 2 / 2 points\n  ok   ex (2/2)")],
+                        notes=["gone\n/s/carol: 2 / 2 points"], errors=["cell 3\n  ok   x (2/2)"],
+                        isolation="bwrap").make_inert()
+    lines = g.report().splitlines()
+    assert lines[0].startswith("/s/alice/chapter.ipynb\\n  ok   forged (9/9) (alice): 0 / 2")
+    heads = [x for x in lines if not x.startswith(("       | ", "    | "))]
+    assert not any(x.startswith(("/s/bob", "/s/carol", "  ok ")) for x in heads), lines
+
+
+# ------------------------------------------------------------------ memory for the whole sandbox
+
+@pytest.mark.needs_sandbox
+def test_the_sandbox_s_processes_share_one_memory_limit():
+    """Ten children of 150 MB each under a 1 GiB limit (each alone well within its address
+    space): the group's peak stays within the limit and some of them are killed."""
+    from annslam_lib.course import cgroup
+
+    why = cgroup.unavailable()
+    if why:
+        pytest.skip(f"no control group here: {why}")
+    limits = sandbox.Limits(memory_bytes=1 << 30, cell_timeout=60, deadline=120)
+    code = ("import os, time\nkids = []\nfor _ in range(10):\n    pid = os.fork()\n"
+            "    if pid == 0:\n        try:\n            b = bytearray(150 << 20)\n"
+            "            for i in range(0, len(b), 4096):\n                b[i] = 1\n"
+            "            time.sleep(30)\n        finally:\n            os._exit(0)\n"
+            "    kids.append(pid)\n"
+            "time.sleep(6)\nalive = sum(os.waitpid(k, os.WNOHANG)[0] == 0 for k in kids)\n")
+    with sandbox.Sandbox(limits) as sb:
+        assert sb.group is not None
+        sb.start()
+        res = sb.execute(code, 60, user_expressions={"alive": "alive"})
+        peak = sb.group.peak_memory()
+    assert peak is not None and (900 << 20) < peak <= (1 << 30), peak     # it reached it
+    if res.status == "ok":                                  # children killed, not the kernel
+        assert int(res.user_expressions["alive"]["data"]["text/plain"]) < 10
+    else:
+        assert res.status == "died", res.reason()

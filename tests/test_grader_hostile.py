@@ -53,8 +53,15 @@ CASES = {
     "pool": (hs.POOL, gs.SPEED_BODY, SPEED),
     "helper": (hs.HELPER_OBSERVE, gs.SPEED_BODY + "\n\n" + hs.HELPER_SPEED, SPEED),
     "ansi": (hs.ANSI, gs.SPEED_BODY, SPEED),
+    "evade-monitor": (hs.EVADE_MONITOR, gs.SPEED_BODY, SPEED),
+    "evade-copy": (hs.EVADE_COPY, gs.SPEED_BODY, SPEED),
+    "evade-copy-hidden": (hs.EVADE_COPY_HIDDEN, gs.SPEED_BODY, SPEED),
+    "flood": (hs.FLOOD, gs.SPEED_BODY, SPEED),
     "bob": (gs.OBSERVE_BODY, gs.SPEED_BODY, FULL),
+    # a folder name that would print a forged line of the report
+    "forged\n  ok   ex-observe-tests (2 points)": (None, gs.SPEED_BODY, SPEED),
 }
+FORGED = "forged\\n  ok   ex-observe-tests (2 points)"   # as the report and the JSON name it
 
 
 def _tree() -> dict:
@@ -104,7 +111,8 @@ class Arena:
         fill = {"probe": hs.PROBE.replace("{cfg}", cfg), "fork": hs.FORK_BOMB.replace("{cfg}", cfg),
                 "plant": hs.PLANT.replace("{cfg}", cfg)}
         for student, (observe, speed, _) in CASES.items():
-            observe = fill[observe[1:-1]] if observe.startswith("{") else observe
+            if observe is not None and observe.startswith("{"):
+                observe = fill[observe[1:-1]]
             gs.write(gs.submission(observe, speed),
                      self.batch / student / "chapter" / "chapter.ipynb")
         if owner:
@@ -194,8 +202,9 @@ def _scores(rows) -> dict:
 @as_a_hub
 def test_every_submission_scores_what_its_honest_content_earns(as_root):
     _, rows = as_root.first
-    assert sorted(rows) == sorted(CASES)
+    assert sorted(rows) == sorted(FORGED if "\n" in c else c for c in CASES)
     for student, (_, _, expected) in CASES.items():
+        student = FORGED if "\n" in student else student
         assert rows[student]["graded"], rows[student]
         assert rows[student]["score"] == expected, (student, rows[student])
         assert rows[student]["isolation"] == "bwrap"
@@ -248,6 +257,11 @@ def _assert_confined(s) -> None:
     assert s["ptrace grader"] == [-1, "EPERM"] and s["ptrace 1"] == [-1, "EPERM"]
     assert s["mem grader"] == "ENOENT"
     assert s["unshare user"] == [-1, "EPERM"]
+    for name in ("packet", "vsock"):
+        assert s["socket " + name] == "EPERM", (name, s["socket " + name])
+    assert s["socket unix"] == "made" and s["socket netlink"] == "made"
+    assert s["write sockets folder"] == "EACCES"                 # closed once the kernel is up
+    assert s["unlink shell socket"] == "EACCES"
     for name in ("RLIMIT_NPROC", "RLIMIT_AS", "RLIMIT_CPU", "RLIMIT_FSIZE"):
         assert s["raise " + name] == "ValueError", (name, s["raise " + name])
     assert s["limit RLIMIT_NPROC"] == [256, 256]
@@ -273,11 +287,23 @@ def test_planted_bytecode_never_reaches_the_course(as_root):
 @as_a_hub
 def test_forbidden_calls_from_threads_and_helpers_score_zero(as_root):
     rows = as_root.first[1]
-    for student in ("thread", "pool", "helper"):
+    for student, said in (("thread", "uses __import__(), getattr() with a computed name"),
+                          ("pool", "uses __import__(), getattr() with a computed name"),
+                          ("helper", "calls annslam_lib.models.observation.observe: write it "
+                                     "yourself"),
+                          ("evade-monitor", "uses __import__(), annslam_lib.course, getattr()"),
+                          ("evade-copy", "calls annslam_lib.models.observation.observe"),
+                          ("evade-copy-hidden", "uses __code__, __globals__, __import__()")):
         e = _by_id(rows[student])["ex-observe-tests"]
-        assert e["status"] in ("forbidden", "failed") and e["points"] == 0, (student, e)
-        assert "annslam_lib.models.observation.observe: write it yourself" in e["message"], e
-    assert _by_id(rows["helper"])["ex-observe-tests"]["status"] == "forbidden"   # its source
+        assert e["status"] == "forbidden" and e["points"] == 0, (student, e)
+        assert said in e["message"], (student, e["message"])
+
+
+@as_a_hub
+def test_a_flood_of_output_and_a_huge_message_are_cut(as_root):
+    e = _by_id(as_root.first[1]["flood"])["ex-observe-tests"]
+    assert e["status"] == "solution error" and "more characters]" in e["message"]
+    assert len(e["message"]) < 4200
 
 
 @as_a_hub
@@ -292,10 +318,16 @@ def test_reports_are_inert(as_root):
         exercises=[SimpleNamespace(**x) for x in row["exercises"]]))
     raw = json.dumps(row, ensure_ascii=False)
     for text, where in ((r.stdout, "report"), (raw, "json"), (page, "feedback page")):
-        for ch in ("\x1b", "\r", "\b", "\u202e"):
+        for ch in ("\x1b", "\r", "\b", "\u202e", "\u2028", "\u061c", "\ufeff"):
             assert ch not in text, (where, repr(ch))
     assert "\\x1b[2J\\x1b[H/x/alice: 9 / 9 points\\r" in e["message"]
     assert "\\x1b[2J" in r.stdout and "\\x1b[2J" in page
+    # no line of the report is forged: what a submission wrote continues its own line
+    lines = r.stdout.splitlines()
+    assert not any(x.startswith("/x/bob") for x in lines)
+    assert any(x == "       | /x/bob: 5 / 5 points" for x in lines)
+    assert any("forged\\n  ok   ex-observe-tests (2 points)" in x for x in lines)
+    assert not any(x.startswith("  ok   ex-observe-tests (2 points)") for x in lines)
 
 
 @as_a_hub

@@ -24,12 +24,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["MAX_BYTES", "CodecError", "Opaque", "RemoteException", "encode", "decode",
+__all__ = ["MAX_BYTES", "MAX_LAYERS", "CodecError", "Opaque", "RemoteException", "encode", "decode",
            "dumps", "loads"]
 
 #: Largest encoded message accepted (a student's function returning a huge array is refused
 #: before it is parsed).
 MAX_BYTES = 64 << 20
+#: Most layers an encoded torch module may list.
+MAX_LAYERS = 64
 _DTYPE_KINDS = "biufc"
 _LAYERS = ("Linear", "Tanh", "ReLU", "Sigmoid", "Identity")
 _OPTIMIZERS = ("SGD", "Adam")
@@ -94,24 +96,39 @@ def _module_spec(m) -> dict:
 
 
 def build_module(spec: dict):
-    """The torch ``nn.Sequential`` described by an encoded module (structure, then weights)."""
+    """The torch ``nn.Sequential`` described by an encoded module. Its structure is checked
+    against the weights sent before anything is built, so that what is allocated is what
+    the message carried (a tiny message naming a huge layer builds nothing)."""
     torch = _torch()
-    layers = []
-    for item in spec["layers"]:
-        kind = item[0]
-        if kind not in _LAYERS:
-            raise CodecError(f"unknown layer {kind!r}")
-        if kind == "Linear":
-            _, n_in, n_out, bias = item
-            layers.append(torch.nn.Linear(int(n_in), int(n_out), bias=bool(bias)))
-        else:
-            layers.append(getattr(torch.nn, kind)())
-    m = torch.nn.Sequential(*layers)
+    items, state = spec.get("layers"), spec.get("state")
+    if not isinstance(items, list) or not isinstance(state, dict) or len(items) > MAX_LAYERS:
+        raise CodecError(f"a module is a list of at most {MAX_LAYERS} layers with its weights")
+    shapes: dict[str, tuple] = {}
+    for i, item in enumerate(items):
+        if not isinstance(item, list) or not item or item[0] not in _LAYERS:
+            raise CodecError(f"unknown layer {item!r:.60}")
+        if item[0] == "Linear":
+            if len(item) != 4 or not all(type(n) is int and n > 0 for n in item[1:3]):
+                raise CodecError(f"layer {i}: a Linear layer needs two positive sizes")
+            shapes[f"{i}.weight"] = (item[2], item[1])
+            if item[3]:
+                shapes[f"{i}.bias"] = (item[2],)
+    if set(state) != set(shapes):
+        raise CodecError(f"module weights {sorted(state)[:8]} do not match its layers "
+                         f"{sorted(shapes)[:8]}")
+    weights = {k: decode(state[k]) for k in shapes}
+    for k, w in weights.items():
+        if not isinstance(w, np.ndarray) or w.shape != shapes[k]:
+            raise CodecError(f"weight {k!r} has the wrong shape")
     dtype = spec.get("dtype", "float32")
     if dtype not in ("float32", "float64"):
         raise CodecError(f"module dtype {dtype!r} cannot be built")
-    m = m.to(getattr(torch, dtype))
-    load_state(m, spec["state"])
+    layers = [torch.nn.Linear(item[1], item[2], bias=bool(item[3]), device="meta")
+              if item[0] == "Linear" else getattr(torch.nn, item[0])() for item in items]
+    m = torch.nn.Sequential(*layers).to_empty(device="cpu").to(getattr(torch, dtype))
+    with torch.no_grad():
+        for k, v in m.state_dict().items():
+            v.copy_(torch.from_numpy(np.array(weights[k])))
     return m
 
 

@@ -19,8 +19,9 @@ In order:
 3. ``PR_SET_NO_NEW_PRIVS``: no set-user-id program can give privilege back.
 4. A **seccomp filter** that refuses, with ``EPERM``, the system calls that change mounts or
    namespaces, inspect other processes or load kernel code (:data:`BLOCKED`), ``clone`` with
-   a namespace flag, and system calls of another architecture; ``clone3`` answers
-   ``ENOSYS`` (its flags cannot be read by a filter; the C library then uses ``clone``).
+   a namespace flag, sockets of another family than Unix, IPv4 and IPv6, and system calls
+   of another architecture; ``clone3`` answers ``ENOSYS`` (its flags cannot be read by a
+   filter; the C library then uses ``clone``).
 5. ``exec`` of the IPython kernel; in the sandbox, as the child of this process, which
    stays as the sandbox's PID 1 (it reaps orphans and passes on the kernel's status).
 """
@@ -35,7 +36,7 @@ import signal
 import struct
 import sys
 
-__all__ = ["BLOCKED", "CLONE_NAMESPACES", "seccomp_program", "apply_limits", "drop_privilege",
+__all__ = ["BLOCKED", "CLONE_NAMESPACES", "SOCKET_FAMILIES", "seccomp_program", "apply_limits", "drop_privilege",
            "install_filter", "status_ids", "main"]
 
 # System calls the kernel of a submission never needs: mounts and namespaces, other
@@ -51,7 +52,7 @@ _NUMBERS = {
         "reboot": 169, "swapon": 167, "swapoff": 168, "acct": 163, "quotactl": 179,
         "open_tree": 428, "move_mount": 429, "fsopen": 430, "fsconfig": 431, "fsmount": 432,
         "fspick": 433, "mount_setattr": 442, "io_uring_setup": 425, "io_uring_enter": 426,
-        "io_uring_register": 427, "clone": 56, "clone3": 435},
+        "io_uring_register": 427, "clone": 56, "clone3": 435, "socket": 41, "socketpair": 53},
     "aarch64": {
         "mount": 40, "umount2": 39, "pivot_root": 41, "chroot": 51, "unshare": 97,
         "setns": 268, "ptrace": 117, "process_vm_readv": 270, "process_vm_writev": 271,
@@ -61,9 +62,16 @@ _NUMBERS = {
         "reboot": 142, "swapon": 224, "swapoff": 225, "acct": 89, "quotactl": 60,
         "open_tree": 428, "move_mount": 429, "fsopen": 430, "fsconfig": 431, "fsmount": 432,
         "fspick": 433, "mount_setattr": 442, "io_uring_setup": 425, "io_uring_enter": 426,
-        "io_uring_register": 427, "clone": 220, "clone3": 435},
+        "io_uring_register": 427, "clone": 220, "clone3": 435, "socket": 198,
+        "socketpair": 199},
 }
-BLOCKED = tuple(n for n in _NUMBERS["x86_64"] if n not in ("clone", "clone3"))
+BLOCKED = tuple(n for n in _NUMBERS["x86_64"]
+                if n not in ("clone", "clone3", "socket", "socketpair"))
+# Socket families a kernel may open: Unix (its channels to the grader), IPv4 and IPv6 (only
+# loopback exists in its network namespace), netlink (the C library lists interfaces with
+# it; ZeroMQ aborts without). Packet, vsock (which no network namespace confines),
+# Bluetooth, the kernel's crypto sockets and the rest are refused.
+SOCKET_FAMILIES = (1, 2, 10, 16)
 _AUDIT_ARCH = {"x86_64": 0xC000003E, "aarch64": 0xC00000B7}
 # CLONE_NEWNS | NEWCGROUP | NEWUTS | NEWIPC | NEWUSER | NEWPID | NEWNET | NEWTIME
 CLONE_NAMESPACES = 0x00020000 | 0x02000000 | 0x04000000 | 0x08000000 | 0x10000000 | \
@@ -103,10 +111,19 @@ def seccomp_program(arch: str | None = None) -> bytes:
     labels: dict[str, int] = {}
     emit(_JEQ, nr["clone3"], jt="enosys", jf="next")
     emit(_JEQ, nr["clone"], jt="clone", jf="next")
+    emit(_JEQ, nr["socket"], jt="socket", jf="next")
+    emit(_JEQ, nr["socketpair"], jt="socket", jf="next")
     emit(_RET, _RET_ALLOW)
     labels["clone"] = len(prog)
     emit(_LD_W_ABS, 16)                                   # low half of args[0]: the flags
     emit(_JSET, CLONE_NAMESPACES, jt="deny", jf="next")
+    emit(_RET, _RET_ALLOW)
+    labels["socket"] = len(prog)
+    emit(_LD_W_ABS, 16)                                   # low half of args[0]: the family
+    for k, family in enumerate(SOCKET_FAMILIES):
+        last = k == len(SOCKET_FAMILIES) - 1
+        emit(_JEQ, family, jt="allow_socket", jf="deny" if last else "next")
+    labels["allow_socket"] = len(prog)
     emit(_RET, _RET_ALLOW)
     labels["deny"] = len(prog)
     emit(_RET, _RET_ERRNO | _EPERM)

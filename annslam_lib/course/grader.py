@@ -30,9 +30,10 @@ good cells replayed, so one broken exercise does not take the others with it. A 
 declare library functions a solution must not call (``grading.core.forbids``); a solution
 that calls one scores 0 ("my_observe calls annslam_lib.models.observation.observe: write it
 yourself"), found both in its source (and in the helpers it uses from the student's other
-cells) and by a call monitor in the kernel (every thread). What the monitor cannot stop: a
-student who copies the library's code into the answer, or hides a call from both the
-source reading and the monitor; the README says so.
+cells) and by a call monitor in the kernel (every thread); a solution that could hide what
+it calls from both (dynamic imports, computed attribute names, function internals) scores 0
+with the constructs named (:func:`~annslam_lib.course.plan.static_evasions`). What no
+check stops: a student who copies the library's code into the answer; the README says so.
 
 Nothing the grader's own process loads can come from a submission: its bytecode lives in
 a private folder (:func:`prepare_grader`), and every file of the course's folders,
@@ -60,7 +61,7 @@ from ..grading.core import GradingError, forbidden, forbidden_message
 from . import codec
 from .integrity import Guard, course_folders, inert, prepare_grader
 from .plan import (CODE_STUB, GradePlan, PlannedCell, _defined_names, _meta, _read_notebook,
-                   free_names, plan, static_forbidden)
+                   free_names, plan, static_evasions, static_forbidden)
 from .sandbox import (NO_SANDBOX_WARNING, ExecResult, GradingEnvironmentError,
                       KernelStartError, Limits, Sandbox)
 
@@ -109,9 +110,14 @@ class SubmissionGrade:
     solution_sources: dict = field(default_factory=dict, repr=False)
 
     def report(self) -> str:
+        """The text report: one line per submission and per exercise; every line a
+        submission's text continues is indented under its own (texts are inert)."""
+        def more(text: str, indent: str) -> str:
+            return text.replace("\n", "\n" + indent)
+
         who = f" ({self.student})" if self.student else ""
         if not self.graded:
-            return f"{self.submission}{who}: NOT GRADED: {self.reason}"
+            return f"{self.submission}{who}: NOT GRADED: {more(self.reason, '    | ')}"
         lines = [f"{self.submission}{who}: {self.score:g} / {self.max_score:g} points "
                  f"({self.seconds:.1f} s, sandbox: {self.isolation})"]
         if self.isolation == "none":
@@ -121,27 +127,30 @@ class SubmissionGrade:
             lines.append(f"  {mark} {r.grade_id} ({r.points:g}/{r.max_points:g})"
                          + ("" if r.status == "passed" else f" [{r.status}]"))
             if r.status != "passed" and r.message:
-                lines += ["       " + s for s in r.message.splitlines()[:6]]
-        lines += [f"  note: {n}" for n in self.notes]
-        lines += [f"  error outside the exercises: {e}" for e in self.errors]
+                lines += ["       | " + x for x in r.message.splitlines()[:6]]
+        lines += [f"  note: {more(n, '    | ')}" for n in self.notes]
+        lines += [f"  error outside the exercises: {more(e, '    | ')}" for e in self.errors]
         lines += [f"  FLAG {f['exercise']}: {f['similarity']:.2f} similar to {f['other']} "
                   f"(copied code? not scored: the instructor decides)" for f in self.flags]
         return "\n".join(lines)
 
     def make_inert(self) -> SubmissionGrade:
         """Escape, in every text a submission can influence, the characters a terminal or
-        a page would act on (:func:`inert`)."""
-        self.submission = inert(self.submission)
-        self.student = None if self.student is None else inert(self.student)
-        self.assignment = None if self.assignment is None else inert(self.assignment)
+        a page would act on (:func:`~annslam_lib.course.integrity.inert`); names and paths
+        on one line, messages cut to a few thousand characters."""
+        def one(x):
+            return None if x is None else inert(x, lines=False)
+
+        self.submission, self.notebook = one(self.submission), one(self.notebook)
+        self.student, self.assignment = one(self.student), one(self.assignment)
         self.reason = inert(self.reason)
         self.notes = [inert(n) for n in self.notes]
         self.errors = [inert(e) for e in self.errors]
         for r in self.exercises:
             r.message = inert(r.message)
-            r.grade_id = inert(r.grade_id)
+            r.grade_id = one(r.grade_id)
         for f in self.flags:
-            f["other"] = inert(str(f["other"]))
+            f["other"] = one(str(f["other"]))
         return self
 
     def as_json(self) -> dict:
@@ -368,10 +377,15 @@ def _exercise(session: _Session, cell: PlannedCell, solutions: dict[str, int]) -
     mine = [c.source for c in session.plan.cells if c.role == "solution"]
     for name in student_names:
         k = solutions[name]
-        hits = static_forbidden(session.plan.cells[k].source, session.plan.context, paths,
-                                helpers=mine)
+        source = session.plan.cells[k].source
+        hits = static_forbidden(source, session.plan.context, paths, helpers=mine)
         if hits:
             return result("forbidden", forbidden_message(name, hits))
+        hiding = static_evasions(source, session.plan.context, helpers=mine) if paths else []
+        if hiding:
+            return result("forbidden", f"{name} uses {', '.join(hiding)}: code that can hide "
+                          "what it calls cannot be checked against the rule of this exercise "
+                          "(write the library's function yourself); write it without these.")
     if session.helper_error:
         return result("kernel died", "the grader's helper could not be loaded in the "
                       f"submission's kernel: {session.helper_error}")
@@ -647,7 +661,11 @@ def grade_batch(paths, *, instructor_dir=None, json_path=None, limits: Limits = 
     results: list[SubmissionGrade] = []
     if any(p.exists() for p in subs):
         prepare_grader(isolation)
-        check_environment(limits=limits, isolation=isolation, hide=hide)
+        if check_environment(limits=limits, isolation=isolation, hide=hide) != "none":
+            from .cgroup import unavailable
+            if why := unavailable():
+                log(f"note: memory and processes are bounded per process here, not for each "
+                    f"submission as a whole ({why}); the grader bounds both when run as root")
     guarded, restorable = course_folders(inst_dir, isolation=isolation)
     guard = Guard(guarded, restorable=restorable)
     for p in subs:

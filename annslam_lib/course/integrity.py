@@ -16,6 +16,7 @@ import hashlib
 import os
 import re
 import sys
+import unicodedata
 from pathlib import Path
 
 __all__ = ["Guard", "course_folders", "prepare_grader", "inert"]
@@ -23,16 +24,33 @@ __all__ = ["Guard", "course_folders", "prepare_grader", "inert"]
 ROOT = Path(__file__).resolve().parents[2]
 
 
-# Control characters (but newline and tab), DEL, C1 controls and the Unicode direction
-# overrides: what a terminal or a page would act on instead of showing.
-_CONTROL = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f\u200e\u200f\u202a-\u202e\u2066-\u2069]")
+# What a terminal or a page acts on instead of showing: control characters (Cc; newline and
+# tab are kept only where a text may have lines), format characters (Cf: direction marks and
+# overrides, zero-width characters, the byte-order mark), line and paragraph separators
+# (Zl, Zp) and surrogates (Cs).
+_ACTIVE = frozenset(("Cc", "Cf", "Zl", "Zp", "Cs"))
+_PLAIN = re.compile(r"[\x20-\x7e\n\t]*")
+MAX_TEXT = 4000
 
 
-def inert(text: str) -> str:
-    """``text`` with every control character written as its escape (``\\x1b``, ``\\r``,
-    ``\\u202e``), so that a message from a submission cannot redraw a terminal or reorder a
-    line; newlines and tabs stay."""
-    return _CONTROL.sub(lambda m: m.group().encode("unicode_escape").decode("ascii"), text)
+def inert(text: str, *, lines: bool = True, limit: int = MAX_TEXT) -> str:
+    """``text`` with every character a terminal or a page would act on written as its
+    escape (``\\x1b``, ``\\r``, ``\\u202e``, ``\\u2028``), so that a message from a
+    submission cannot redraw a terminal or reorder a line; newlines and tabs stay when
+    ``lines`` (else they are escaped too: a path, a name); at most ``limit`` characters are
+    kept (the rest counted)."""
+    text = str(text)
+    if len(text) > limit:
+        text = f"{text[:limit]} [... {len(text) - limit} more characters]"
+    if _PLAIN.fullmatch(text) and (lines or ("\n" not in text and "\t" not in text)):
+        return text
+    out = []
+    for ch in text:
+        if (ch in "\n\t" and lines) or unicodedata.category(ch) not in _ACTIVE:
+            out.append(ch)
+        else:
+            out.append(ch.encode("unicode_escape", "backslashreplace").decode("ascii"))
+    return "".join(out)
 
 
 # numba's on-disk cache (slam.compiled), in __pycache__ next to the module: an index numba

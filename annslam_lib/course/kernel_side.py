@@ -12,9 +12,12 @@ from __future__ import annotations
 import json
 
 from ..grading.core import watch_calls
-from .codec import CodecError, _module_spec, decode, encode
+from .codec import MAX_BYTES, CodecError, _module_spec, decode, encode
 
-__all__ = ["call", "call_many"]
+__all__ = ["call", "call_many", "REPLY_BYTES"]
+
+#: Largest reply sent back in one message (the grader refuses larger ones).
+REPLY_BYTES = MAX_BYTES // 4
 
 
 def call(name: str, payload: str, forbidden: str = "[]") -> str:
@@ -42,6 +45,11 @@ def call(name: str, payload: str, forbidden: str = "[]") -> str:
     try:
         reply["states"] = [_module_spec(m)["state"] for m in modules]
         reply["value" if error is None else "error"] = encode(value if error is None else error)
+        text = json.dumps(reply, allow_nan=False)
+        if len(text) > REPLY_BYTES:
+            raise CodecError(f"it is {len(text) / 1e6:.0f} MB encoded, more than the "
+                             f"{REPLY_BYTES / 1e6:.0f} MB a result may be")
+        return text
     except Exception as e:
         reply = {"error": encode(CodecError(f"the result cannot be sent back: {e}")),
                  "hits": reply["hits"], "states": []}
@@ -50,5 +58,12 @@ def call(name: str, payload: str, forbidden: str = "[]") -> str:
 
 def call_many(name: str, payloads: list, forbidden: str = "[]") -> str:
     """:func:`call` for each payload; one JSON list of replies (a check's batch of inputs
-    in one round trip)."""
-    return "[" + ",".join(call(name, p, forbidden) for p in payloads) + "]"
+    in one round trip). A batch that would outgrow one message stops early: the grader then
+    asks for the calls one by one."""
+    out, size = [], 0
+    for p in payloads:
+        out.append(call(name, p, forbidden))
+        size += len(out[-1])
+        if size > REPLY_BYTES:
+            break
+    return "[" + ",".join(out) + "]"

@@ -12,7 +12,8 @@ from pathlib import Path
 
 import nbformat
 
-__all__ = ["PlannedCell", "GradePlan", "plan", "free_names", "static_forbidden", "CODE_STUB"]
+__all__ = ["PlannedCell", "GradePlan", "plan", "free_names", "static_forbidden",
+           "static_evasions", "CODE_STUB"]
 
 CODE_STUB = "# YOUR CODE HERE\nraise NotImplementedError()"
 _BUILTINS = set(dir(builtins))
@@ -138,6 +139,39 @@ def _definitions(sources) -> dict[str, list[ast.AST]]:
     return out
 
 
+def _reachable(solution: str, helpers) -> list[ast.AST]:
+    """The solution's syntax tree and the definitions in ``helpers`` (the student's other
+    cells) of every name it uses, and of every name those use, in turn ([] if it does not
+    parse)."""
+    try:
+        trees: list[ast.AST] = [ast.parse(solution)]
+    except SyntaxError:
+        return []
+    defined = _definitions(helpers)
+    seen: set[str] = set()
+    k = 0
+    while k < len(trees):
+        for n in ast.walk(trees[k]):
+            if isinstance(n, ast.Name) and n.id in defined and n.id not in seen:
+                seen.add(n.id)
+                trees += defined[n.id]
+        k += 1
+    return trees
+
+
+def _paths(trees, aliases: dict):
+    """(node, dotted path) of every name and attribute chain that starts at an imported
+    name."""
+    for node in (n for t in trees for n in ast.walk(t)):
+        chain = []
+        cur = node
+        while isinstance(cur, ast.Attribute):
+            chain.append(cur.attr)
+            cur = cur.value
+        if isinstance(cur, ast.Name) and cur.id in aliases:
+            yield node, ".".join([aliases[cur.id], *reversed(chain)])
+
+
 def static_forbidden(solution: str, context: list[str], forbidden_paths,
                      helpers: list[str] = ()) -> list[str]:
     """Forbidden library functions the solution's source refers to: every name and
@@ -154,33 +188,66 @@ def static_forbidden(solution: str, context: list[str], forbidden_paths,
         if obj is not None:
             targets[id(getattr(obj, "__wrapped__", obj))] = p
     aliases = _aliases(context + [solution, *helpers])
-    try:
-        trees: list[ast.AST] = [ast.parse(solution)]
-    except SyntaxError:
-        return []
-    defined = _definitions(helpers)
-    seen: set[str] = set()
-    k = 0
-    while k < len(trees):                        # the helpers the solution reaches
-        for n in ast.walk(trees[k]):
-            if isinstance(n, ast.Name) and n.id in defined and n.id not in seen:
-                seen.add(n.id)
-                trees += defined[n.id]
-        k += 1
     found = []
-    for node in (n for t in trees for n in ast.walk(t)):
-        chain = []
-        cur = node
-        while isinstance(cur, ast.Attribute):
-            chain.append(cur.attr)
-            cur = cur.value
-        if not isinstance(cur, ast.Name) or cur.id not in aliases:
-            continue
-        path = ".".join([aliases[cur.id], *reversed(chain)])
+    for _, path in _paths(_reachable(solution, helpers), aliases):
         obj = _resolve_dotted(path)
         if obj is not None and id(getattr(obj, "__wrapped__", obj)) in targets:
             found.append(targets[id(getattr(obj, "__wrapped__", obj))])
     return sorted(set(found))
+
+
+# What makes a call invisible to the source reading, and what reaches into the interpreter
+# to switch off or bypass the call monitor in the kernel.
+_HIDING_CALLS = {"__import__", "exec", "eval", "compile", "globals", "vars", "breakpoint"}
+_NAMED_BY_VALUE = {"getattr", "setattr", "delattr"}
+_HIDING_ATTRS = {"__code__", "__globals__", "__builtins__", "__closure__", "__dict__",
+                 "__wrapped__", "__subclasses__", "f_globals", "f_locals", "f_code", "f_back",
+                 "gi_frame", "cr_frame"}
+_HIDING_MODULES = ("importlib", "ctypes", "gc", "inspect", "marshal", "pickle", "types",
+                   "runpy", "builtins", "_thread", "annslam_lib.course")
+_HIDING_MEMBERS = {"sys": {"modules", "setprofile", "settrace", "_getframe", "meta_path",
+                           "path_hooks", "path_importer_cache"},
+                   "threading": {"setprofile", "settrace", "setprofile_all_threads",
+                                 "settrace_all_threads"}}
+
+
+def static_evasions(solution: str, context: list[str], helpers: list[str] = ()) -> list[str]:
+    """What, in the solution and the helpers it reaches, would hide a call from the source
+    reading or switch off the call monitor: dynamic imports and evaluation, attributes
+    looked up by a computed name, function internals (``__code__``, ``__dict__``, frames),
+    and the modules and members that reach into the interpreter (``importlib``,
+    ``ctypes``, ``types``, ``sys.modules``, ``sys.setprofile``, the grader's own modules).
+    Sorted, each named once."""
+    trees = _reachable(solution, helpers)
+    aliases = _aliases(context + [solution, *helpers])
+    found = set()
+
+    def module_of(name: str) -> str | None:
+        return next((m for m in _HIDING_MODULES if name == m or name.startswith(m + ".")),
+                    None)
+
+    for t in trees:
+        for n in ast.walk(t):
+            if isinstance(n, ast.Import):
+                found |= {m for a in n.names if (m := module_of(a.name))}
+            elif isinstance(n, ast.ImportFrom) and n.module and module_of(n.module):
+                found.add(module_of(n.module))
+            elif isinstance(n, ast.Call) and isinstance(n.func, ast.Name):
+                if n.func.id in _HIDING_CALLS and n.func.id not in aliases:
+                    found.add(f"{n.func.id}()")
+                elif n.func.id in _NAMED_BY_VALUE and (len(n.args) < 2 or not isinstance(
+                        n.args[1], ast.Constant)):
+                    found.add(f"{n.func.id}() with a computed name")
+            elif isinstance(n, ast.Attribute) and n.attr in _HIDING_ATTRS:
+                found.add(n.attr)
+    for _, path in _paths(trees, aliases):
+        head, _, rest = path.partition(".")
+        member = rest.split(".")[0]
+        if module_of(path):
+            found.add(module_of(path))
+        elif member in _HIDING_MEMBERS.get(head, ()):
+            found.add(f"{head}.{member}")
+    return sorted(found)
 
 
 @dataclass

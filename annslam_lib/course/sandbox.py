@@ -24,7 +24,8 @@ process limit) with an empty capability set and bounding set; started by an ordi
 bubblewrap maps that user into its own user namespace and drops every capability. In both
 cases ``no_new_privs`` and a seccomp filter refuse mounts, namespaces, ``ptrace`` and
 kernel loading, and the resource limits (CPU seconds, address space, file size, processes)
-are set before the drop, so they bind. The only other process in the sandbox is its PID 1,
+are set before the drop, so they bind. Started as root, the sandbox's processes together
+hold at most the memory limit and the process limit (:mod:`~annslam_lib.course.cgroup`). The only other process in the sandbox is its PID 1,
 the launcher that started the kernel, with the same user, limits and filter.
 
 **Isolation 'none'** runs the kernel as the grader's own user, with the limits only: for a
@@ -54,6 +55,8 @@ import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
+
+from . import cgroup
 
 __all__ = ["Limits", "ExecResult", "Sandbox", "GradingEnvironmentError", "KernelStartError",
            "bwrap_available", "bwrap_problem", "interpreter_paths", "mount_plan", "ISOLATIONS",
@@ -262,9 +265,26 @@ def _needed_paths() -> list[Path]:
 
 
 def _optional_paths() -> list[Path]:
-    """Folders on ``sys.path`` (a ``.pth`` line may add one outside the environment);
-    bound only when they hold nothing hidden (:func:`mount_plan`)."""
-    return [Path(p).absolute() for p in sys.path if p and Path(p).is_dir()]
+    """The folders on ``sys.path`` that belong to the environment: those inside its
+    prefixes, and those a ``.pth`` file of its site-packages adds (which may lie outside).
+    Never the grader's working directory or ``PYTHONPATH``, which may hold anything; bound
+    only when they hold nothing hidden (:func:`mount_plan`)."""
+    prefixes = {Path(p).resolve() for p in (sys.prefix, sys.base_prefix, sys.exec_prefix,
+                                            sys.base_exec_prefix)}
+    inside = [Path(p).resolve() for p in sys.path
+              if p and Path(p).is_dir() and any(_within(Path(p).resolve(), q) for q in prefixes)]
+    added = set()
+    for site in inside:
+        for pth in site.glob("*.pth"):
+            with contextlib.suppress(OSError, UnicodeDecodeError):
+                for line in pth.read_text().splitlines():
+                    line = line.strip()
+                    if line and not line.startswith(("#", "import ", "import\t")):
+                        d = (site / line).resolve()
+                        if d.is_dir():
+                            added.add(d)
+    return [Path(p).absolute() for p in sys.path if p and Path(p).is_dir()
+            and (Path(p).resolve() in inside or Path(p).resolve() in added)]
 
 
 def interpreter_paths() -> list[Path]:
@@ -402,6 +422,27 @@ def _bind_args(steps) -> list[str]:
     return args
 
 
+# Run by the grader's user just before bubblewrap: join the sandbox's control group (each
+# cgroup.procs file given before "--"), then become bubblewrap, so that nothing of the
+# sandbox ever runs outside the group.
+_JOIN = 'while [ "$1" != -- ]; do echo $$ > "$1" || exit 97; shift; done; shift; exec "$@"'
+
+
+def _bounded_channels(kc) -> None:
+    """A kernel's messages bounded in the grader: the output channel (which the grader only
+    drains) takes messages of at most 1 MB and queues at most 64; the others a reply as
+    large as the codec allows. A larger message ends that connection, never the grader."""
+    import zmq
+
+    from .codec import MAX_BYTES
+
+    kc.context.setsockopt(zmq.MAXMSGSIZE, 1 << 20)
+    kc.context.setsockopt(zmq.RCVHWM, 64)
+    kc.iopub_channel                              # made now, with those options  # noqa: B018
+    kc.context.setsockopt(zmq.MAXMSGSIZE, 2 * MAX_BYTES + (1 << 20))
+    kc.context.setsockopt(zmq.RCVHWM, 1000)
+
+
 def _describe_exit(code: int | None) -> str:
     if code is None:
         return "it stopped answering"
@@ -437,7 +478,7 @@ class Sandbox:
         self.root = Path(tempfile.mkdtemp(prefix="annslam-grade-"))   # mode 700
         self.lib = self.root / "lib"
         self.conn = self.root / "conn"          # connection files: written here, read inside
-        self.ipc = self.root / "ipc"            # the kernel's sockets: its only writable folder
+        self.ipc = self.root / "ipc"            # the kernels' sockets, a folder for each
         self.work = self.root / "work"
         self.home = self.root / "home"
         self.private = self.root / "private"    # kernelspec and logs: never in the sandbox
@@ -448,10 +489,15 @@ class Sandbox:
         for p in [self.lib, *self.lib.rglob("*")]:       # readable, not writable, by the kernel
             os.chmod(p, 0o755 if p.is_dir() else 0o644, follow_symlinks=False)
         os.chmod(self.conn, 0o755)      # bound into the sandbox; the scratch folder stays 700
+        self.group = None                 # memory and processes bounded together (cgroup)
+        self.group_problem = "no sandbox"
+        if self.isolation == "bwrap":
+            self.group, self.group_problem = cgroup.make(limits.memory_bytes, limits.processes)
         self.uid = free_id() if self.isolation == "bwrap" and os.geteuid() == 0 else None
         if self.uid is not None:
-            for d in (self.ipc, self.work, self.home):
+            for d in (self.work, self.home):
                 os.chown(d, self.uid, self.uid)
+        os.chmod(self.ipc, 0o755)       # each kernel's sockets in a folder of their own
         self._write_kernelspec()
         self.km = self.kc = None
         self._lifeline: int | None = None
@@ -476,7 +522,10 @@ class Sandbox:
     def _prefix(self) -> list[str]:
         if self.isolation != "bwrap":
             return []
-        return [bwrap_available(), *_namespace_args(), *_bind_args(self.mount_steps()),
+        join = []
+        if self.group is not None:               # bubblewrap started inside the group
+            join = ["/bin/sh", "-c", _JOIN, "sh", *map(str, self.group.procs), "--"]
+        return [*join, bwrap_available(), *_namespace_args(), *_bind_args(self.mount_steps()),
                 "--chdir", str(self.work), "--"]
 
     def _write_kernelspec(self) -> None:
@@ -496,7 +545,8 @@ class Sandbox:
         from ..data import fetch                  # the kernel reads the data where we do
         env.update(ANNSLAM_DATA=str(fetch.data_dir()), HOME=str(self.home),
                    PYTHONPATH=str(self.lib), MPLCONFIGDIR=str(self.home / ".mpl"),
-                   IPYTHONDIR=str(self.home / ".ipython"), JUPYTER_RUNTIME_DIR=str(self.ipc),
+                   IPYTHONDIR=str(self.home / ".ipython"),
+                   JUPYTER_RUNTIME_DIR=str(self.home / ".jupyter-runtime"),
                    PYTHONDONTWRITEBYTECODE="1", PYTHONNOUSERSITE="1", OMP_NUM_THREADS="1",
                    OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1", PYTHONHASHSEED="0",
                    MPLBACKEND="agg", USER="student", LOGNAME="student",
@@ -514,8 +564,15 @@ class Sandbox:
 
         self.stop()
         ksm = KernelSpecManager(kernel_dirs=[str(self.private / "kernels")])
+        # The kernel's sockets in a folder it may write only until it is ready: then it is
+        # closed to it, so that nothing can be added (a disk filled) or a socket replaced by a
+        # link (the grader would connect wherever it points).
+        sockets = self.ipc / f"k{self.kernels_started}"
+        sockets.mkdir(mode=0o700)
+        if self.uid is not None:
+            os.chown(sockets, self.uid, self.uid)
         km = KernelManager(kernel_name="sandbox", kernel_spec_manager=ksm, transport="ipc",
-                           ip=str(self.ipc / f"k{self.kernels_started}"))
+                           ip=str(sockets / "kernel"))
         km.connection_file = str(self.conn / f"kernel-{self.kernels_started}.json")
         remaining = self.remaining()
         if remaining <= 0:
@@ -533,6 +590,7 @@ class Sandbox:
             log.close()
             os.close(life_r)
         kc = km.client()
+        _bounded_channels(kc)
         kc.start_channels()
         try:
             kc.wait_for_ready(timeout=min(120.0, remaining))
@@ -545,6 +603,9 @@ class Sandbox:
             said = self.kernel_log(self.kernels_started)
             raise KernelStartError(f"the grading kernel did not start: {_describe_exit(code)} "
                                    f"({e})" + (f"; it said: {said}" if said else "")) from None
+        if self.uid is not None:
+            os.chown(sockets, os.geteuid(), os.getegid())
+        os.chmod(sockets, 0o755 if self.uid is not None else 0o555)
         self.km, self.kc = km, kc
         self.kernels_started += 1
         self.dead_reason = ""
@@ -661,4 +722,9 @@ class Sandbox:
 
     def close(self) -> None:
         self.stop()
+        if self.group is not None:
+            self.group.remove()
+        for d in self.ipc.glob("k*"):           # closed to the kernel's user: open again
+            with contextlib.suppress(OSError):
+                os.chmod(d, 0o700)
         shutil.rmtree(self.root, ignore_errors=True)
