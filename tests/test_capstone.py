@@ -16,7 +16,7 @@ from annslam_lib.slam import config, runner
 from annslam_lib.slam.dense import joseph_covariance, kalman_gain
 from solutions import solution
 
-HIDDEN = ("sim:4101:1", "sim:4102:1")          # the notebook's hidden runs
+HIDDEN = ("sim:4101:1", "sim:4102:1", "sim:4103:1", "sim:4104:1")    # the notebook's hidden runs
 FULL = 8.0
 
 
@@ -139,3 +139,80 @@ def test_the_course_grader_gives_an_honest_capstone_full_marks(tmp_path):
                          Limits(cell_timeout=240.0, call_timeout=120.0, deadline=600.0))
     assert (g.score, g.max_score) == (FULL, FULL), g.report()
     assert g.errors == [], g.report()
+
+
+def _reports(k):
+    """A correct loop that reports k times its covariance."""
+    def my_slam(run):
+        r = cap.reference_slam(run)
+        return {**r, "pose_cov": r["pose_cov"] * k, "landmark_cov": r["landmark_cov"] * k}
+    return my_slam
+
+
+def _no_cross_augment(x, P, z, R):
+    x2, P2 = cap.reference_augment(x, P, z, R)
+    n = len(x)
+    P2 = P2.copy()
+    P2[n:, :n] = 0.0
+    P2[:n, n:] = 0.0
+    return x2, P2
+
+
+def _simple_update(x, P, z, idx, R):
+    """The update with (I - K H) P instead of the Joseph form: the same for the optimal gain."""
+    z, idx = np.asarray(z, float).reshape(-1, 2), np.asarray(idx, int)
+    zhat, Hp, Hm = observe(x[:3], np.reshape(x[3:], (-1, 2))[idx])
+    H = np.zeros((2 * idx.size, len(x)))
+    for i, j in enumerate(idx):
+        H[2 * i:2 * i + 2, :3], H[2 * i:2 * i + 2, 3 + 2 * j:5 + 2 * j] = Hp[i], Hm[i]
+    Rm = np.kron(np.eye(idx.size), R)
+    K = P @ H.T @ np.linalg.inv(H @ P @ H.T + Rm)
+    nu = z - zhat
+    nu[:, 1] = (nu[:, 1] + math.pi) % (2 * math.pi) - math.pi
+    x = x + K @ nu.ravel()
+    x[2] = (x[2] + math.pi) % (2 * math.pi) - math.pi
+    P = (np.eye(len(x)) - K @ H) @ P
+    return x, 0.5 * (P + P.T)
+
+
+@pytest.mark.parametrize("k, says", [(2.0, "under-confident"), (0.5, "over-confident")])
+def test_a_covariance_reported_twice_or_half_as_large_fails_consistency(k, says):
+    with allowing_library_calls():
+        points, messages = gc.score(_reports(k), REF, runs=HIDDEN)
+    assert points == FULL - 5, (k, points, messages)               # runs and map still pass
+    assert len(messages) == 1 and says in messages[0], messages
+    ratio = f"{k ** -1:.2f}"
+    assert ratio in messages[0], messages
+
+
+def test_a_correct_variant_passes_and_a_missing_cross_covariance_in_augment_fails():
+    with allowing_library_calls():
+        simple = {**REF, "update": _simple_update}
+        assert gc.score(_loop(update=_simple_update), simple, runs=HIDDEN) == (FULL, [])
+        broken = {**REF, "augment": _no_cross_augment}
+        points, messages = gc.score(_loop(augment=_no_cross_augment), broken, runs=HIDDEN)
+    assert points == FULL - 5, (points, messages)
+    assert "my_augment leaves the new landmark uncorrelated with the state" in messages[0]
+
+
+def test_the_sandboxed_grader_names_a_broken_augmentation(tmp_path):
+    """Through the grader: the probes reach the student's pieces in the kernel (the car is
+    sent as data, not as an opaque object) and the message names the broken one."""
+    import grading_support as gs
+    from annslam_lib.course.sandbox import Limits
+    from solutions import ROOT
+
+    notebook = ROOT / "notebooks" / "09_capstone.ipynb"
+    bodies = gs.solution_bodies(notebook)
+    bodies["ex09-pieces"] = bodies["ex09-pieces"].replace(
+        "def my_augment(x, P, z, R):",
+        "def my_augment(x, P, z, R):\n    return _augment_without_cross(x, P, z, R)\n\n\n"
+        "def _augment_without_cross(x, P, z, R):\n    n = len(x)\n"
+        "    x2, P2 = _augment(x, P, z, R)\n    P2 = P2.copy()\n    P2[n:, :n] = 0.0\n"
+        "    P2[:n, n:] = 0.0\n    return x2, P2\n\n\ndef _augment(x, P, z, R):", 1)
+    g = gs.grade_chapter(notebook, bodies, tmp_path,
+                         Limits(cell_timeout=240.0, call_timeout=120.0, deadline=600.0))
+    r = {e.grade_id: e for e in g.exercises}
+    assert g.score == FULL - 5, g.report()
+    assert "my_augment leaves the new landmark uncorrelated" in r["ex09-consistency-tests"].message
+    assert "Opaque" not in g.report()

@@ -11,8 +11,9 @@ NumPy arrays and scalars of bool, integer, float or complex dtype (base64 of ``n
 with ``allow_pickle=False``); torch tensors; torch ``nn.Sequential`` stacks of Linear, Tanh,
 ReLU, Sigmoid and Identity layers (their structure and weights) and the SGD and Adam
 optimizers over one module's parameters (their hyper-parameters), which is what the
-chapter 07 training-loop exercise passes; exceptions (class names along the MRO, module,
-message). Sizes are bounded (:data:`MAX_BYTES`).
+chapter 07 training-loop exercise passes; the course's :class:`~annslam_lib.models.vehicle.
+Vehicle` (its four lengths: the capstone's probes pass one); exceptions (class names along
+the MRO, module, message). Sizes are bounded (:data:`MAX_BYTES`).
 """
 from __future__ import annotations
 
@@ -204,6 +205,8 @@ def encode(value, _modules: list | None = None):
         mro = tuple(c.__name__ for c in type(value).__mro__ if c is not object)
         return {"t": "exc", "names": list(mro), "module": type(value).__module__,
                 "msg": str(value)[:2000]}
+    if type(value).__name__ == "Vehicle" and type(value).__module__ == "annslam_lib.models.vehicle":
+        return {"t": "vehicle", "v": {k: float(getattr(value, k)) for k in ("L", "H", "a", "b")}}
     mod = type(value).__module__.split(".")[0]
     if mod == "torch":
         torch = _torch()
@@ -252,6 +255,16 @@ def decode(tree, _modules: list | None = None):
                                str(tree["msg"]))
     if t == "opaque":
         return Opaque(str(tree["type"]), str(tree["text"]))
+    if t == "vehicle":
+        from ..models.vehicle import Vehicle
+        v = tree.get("v")
+        if not isinstance(v, dict) or set(v) != {"L", "H", "a", "b"} or not all(
+                isinstance(x, (int, float)) and not isinstance(x, bool) for x in v.values()):
+            raise CodecError("malformed vehicle")
+        try:
+            return Vehicle(**{k: float(x) for k, x in v.items()})
+        except (TypeError, ValueError) as e:
+            raise CodecError(f"malformed vehicle: {e}") from None
     if t == "tensor":
         torch = _torch()
         x = torch.from_numpy(np.array(decode(tree["v"])))

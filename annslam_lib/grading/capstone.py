@@ -2,14 +2,13 @@
 does on simulated runs it has not seen, with feedback that names the piece at fault.
 
 Three checks, one per graded cell: :func:`check_runs` (the loop runs to the end and returns
-a well-formed track), :func:`check_consistency` (its pose NEES and its final map's NEES
-are those of an honest filter: the mean pose NEES over the runs within [dof/4, 2 dof] and
-each map's NEES per dof at most 3, limits set on the reference loop, whose values are
-2.2-3.7 and 1.1-1.5 on the grader's runs) and :func:`check_map` (every true landmark
-mapped once, within 0.15 m RMS, at most one spurious landmark per run). A failed check
-probes the student's pieces one by one on crafted states (:func:`diagnose`) and names the
-first defect it finds: a cross covariance not propagated or not updated, a wrong sign in
-F, an unwrapped bearing innovation, an augmentation without its cross terms.
+a well-formed track), :func:`check_consistency` (its covariance is a correct EKF's: the
+probes find no defect in its pieces, and its pose NEES and final map NEES are within a
+factor :data:`NEES_RATIO` of the reference loop's on the same runs, both ways) and
+:func:`check_map` (every true landmark mapped once, within 0.15 m RMS, at most one
+spurious landmark per run). The probes (:func:`diagnose`) try the student's pieces on
+crafted states and name the first defect they find: a cross covariance not propagated,
+not updated or not created, a wrong sign in F, an unwrapped bearing innovation.
 """
 from __future__ import annotations
 
@@ -20,7 +19,7 @@ import numpy as np
 from ..chapters import ch09_capstone as cap
 from ..models.vehicle import ACFR_UTE
 from ..slam import dense
-from .core import passed, call, fail, forbids
+from .core import NOT_WRITTEN, call, fail, forbids, passed
 
 __all__ = ["RUNS", "check_runs", "check_consistency", "check_map", "diagnose", "score", "try_run"]
 
@@ -28,8 +27,11 @@ __all__ = ["RUNS", "check_runs", "check_consistency", "check_map", "diagnose", "
 RUNS = ("sim:3001:1",)
 _KEYS = ("t", "pose", "pose_cov", "landmarks", "landmark_cov")
 _CACHE: dict = {}
-NEES_LIMITS = (0.75, 6.0)
-MAP_NEES_LIMIT = 3.0
+#: A consistent filter's NEES against a correct EKF's on the same runs: within this factor,
+#: both ways. Over the four hidden runs a covariance reported twice or half as large is 2
+#: away, an update in the (I - K H) P form 1.00, an Euler prediction 1.14 (the probes,
+#: not this ratio, then ask for the chapter's midpoint step).
+NEES_RATIO = 1.3
 MAP_RMSE_LIMIT = 0.15
 
 
@@ -120,6 +122,8 @@ def diagnose(pieces) -> str | None:
         try:
             xr, Pr = cap.reference_predict(x, P, u, dt, Q, ACFR_UTE)
             xs, Ps = (np.asarray(a, float) for a in p["predict"](x.copy(), P.copy(), u, dt, Q, ACFR_UTE))
+        except NotImplementedError:
+            return f"my_predict {NOT_WRITTEN}"
         except Exception as e:             # noqa: BLE001 (the student's code)
             return f"my_predict raised {type(e).__name__}: {e}"
         if Ps.shape == Pr.shape and not np.allclose(Ps, Pr, atol=1e-9):
@@ -149,7 +153,9 @@ def diagnose(pieces) -> str | None:
         try:
             xr, Pr = cap.reference_update(xl, Pl, z, [0], R)
             xs, Ps = (np.asarray(v, float) for v in p["update"](xl.copy(), Pl.copy(), z, np.array([0]), R))
-        except Exception as e:             # noqa: BLE001
+        except NotImplementedError:
+            return f"my_update {NOT_WRITTEN}"
+        except Exception as e:             # noqa: BLE001 (the student's code)
             return f"my_update raised {type(e).__name__}: {e}"
         if xs.shape == xr.shape and np.max(np.abs(xs[:2] - xr[:2])) > 0.05:
             return ("my_update does not wrap the bearing innovation: a landmark predicted just "
@@ -166,7 +172,9 @@ def diagnose(pieces) -> str | None:
         try:
             xr, Pr = cap.reference_augment(x, P, zn, R)
             xs, Ps = (np.asarray(v, float) for v in p["augment"](x.copy(), P.copy(), zn, R))
-        except Exception as e:             # noqa: BLE001
+        except NotImplementedError:
+            return f"my_augment {NOT_WRITTEN}"
+        except Exception as e:             # noqa: BLE001 (the student's code)
             return f"my_augment raised {type(e).__name__}: {e}"
         if Ps.shape == Pr.shape and not np.allclose(Ps, Pr, atol=1e-9):
             if np.allclose(Ps[7:, :7], 0.0):
@@ -208,32 +216,62 @@ def check_runs(my_slam, pieces=None, *, runs=RUNS, name: str = "my_slam",
                   f"track.", quiet)
 
 
+def _reference_scores(runs) -> list[dict]:
+    """The scores of a correct EKF (the reference loop) on ``runs``, once per process."""
+    out = []
+    for run in runs:
+        key = ("reference", run)
+        if key not in _CACHE:
+            _CACHE[key] = (None, cap.score_run(cap.reference_slam(run), run))
+        out.append(_CACHE[key][1])
+    return out
+
+
+def _ratio_message(what: str, ratio: float, mine: float, ref: float) -> str:
+    if ratio > 1:
+        return (f"{what} is {mine:.3g}, {ratio:.2f} times what a correct EKF reports on the same "
+                f"runs ({ref:.3g}): its covariance is too small for its errors (over-confident)")
+    return (f"{what} is {mine:.3g}, {ratio:.2f} of what a correct EKF reports on the same runs "
+            f"({ref:.3g}): its covariance is too large for its errors (under-confident)")
+
+
 @_FORBIDS
 def check_consistency(my_slam, pieces=None, *, runs=RUNS, name: str = "my_slam",
                       quiet: bool = False) -> str:
-    """The pose NEES averaged over the runs' scans within [0.75, 6] (3 dof) and each final
-    map's NEES per dof at most 3. ``pieces`` {'predict', 'update', 'augment'}: probed to
-    name the defect when this fails."""
+    """The filter's covariance is the one a correct EKF keeps: the probes find no defect in
+    ``pieces`` {'predict', 'update', 'augment'} (a cross covariance not propagated, not
+    updated or not created, a wrong sign in F, an unwrapped bearing), and on the same runs
+    its pose NEES (averaged over the runs' scans) and its final map's NEES per dof are
+    within a factor :data:`NEES_RATIO` of the reference loop's, both ways: a filter that
+    reports twice its covariance, or half of it, fails. Judged against the reference on
+    the same runs because an EKF-SLAM's own NEES varies from run to run by more than a
+    factor of two (1.1 to 9.0 on 200 one-lap runs), while two correct implementations on
+    one run agree to a few per cent."""
     scores = [cap.score_run(_result(my_slam, run, name, pieces), run) for run in runs]
+    defect = diagnose(pieces)
+    if defect and NOT_WRITTEN in defect:
+        fail(f"{defect}: write it in the cell of the pieces, run that cell, then this one.")
+    if defect:
+        fail(f"{name}'s pieces keep the covariance wrong, whatever NEES a run shows: {defect}.")
+    refs = _reference_scores(runs)
     nees = float(np.mean([s["nees_mean"] for s in scores]))
-    lo, hi = NEES_LIMITS
-    if not lo <= nees <= hi:
+    ref_nees = float(np.mean([s["nees_mean"] for s in refs]))
+    maps = float(np.mean([s["map_nees_per_dof"] for s in scores]))
+    ref_map = float(np.mean([s["map_nees_per_dof"] for s in refs]))
+    n = f"{len(runs)} run(s)"
+    pose_ratio, map_ratio = nees / ref_nees, maps / ref_map
+    if not 1 / NEES_RATIO <= pose_ratio <= NEES_RATIO:        # NaN fails too
         worst = max(scores, key=lambda s: s["nees_mean"])
-        side = "over-confident: its errors are larger than its covariance says" if nees > hi \
-            else "under-confident: its covariance is much larger than its errors"
-        fail(f"{name}'s pose NEES averages {nees:.3g} over {len(runs)} run(s) (a consistent "
-             f"filter: about 3; accepted {lo:g} to {hi:g}): {side}. Largest NEES "
+        fail(f"{_ratio_message(f'{name} pose NEES on {n}', pose_ratio, nees, ref_nees)}; "
+             f"accepted {1 / NEES_RATIO:.2f} to {NEES_RATIO:.2f} times. Largest NEES "
              f"{float(np.max(worst['nees'])):.3g} at scan {worst['worst_scan']} "
              f"(t = {worst['worst_t']:.1f} s).{_cause(pieces)}")
-    for run, s in zip(runs, scores):
-        if not s["map_nees_per_dof"] <= MAP_NEES_LIMIT:      # NaN fails too
-            fail(f"{name}'s final map on {run!r} has NEES {s['map_nees_per_dof']:.3g} per dof over "
-                 f"its {s['matched']} landmarks matched to the truth (a consistent map: about 1; "
-                 f"accepted up to {MAP_NEES_LIMIT:g}): the map's covariance does not describe its "
-                 f"errors.{_cause(pieces)}")
-    return passed(f"✓ {name} is consistent on {len(runs)} run(s): mean pose NEES {nees:.2f} "
-                  f"(3 dof), map NEES per dof at most "
-                  f"{max(s['map_nees_per_dof'] for s in scores):.2f}.", quiet)
+    if not 1 / NEES_RATIO <= map_ratio <= NEES_RATIO:
+        fail(f"{_ratio_message(f'{name} final map NEES per dof on {n}', map_ratio, maps, ref_map)}"
+             f"; accepted {1 / NEES_RATIO:.2f} to {NEES_RATIO:.2f} times.{_cause(pieces)}")
+    return passed(f"✓ {name}'s covariance is a correct EKF's on {n}: pose NEES {nees:.2f} "
+                  f"({pose_ratio:.2f} of the reference's), map NEES per dof {maps:.2f} "
+                  f"({map_ratio:.2f}).", quiet)
 
 
 @_FORBIDS
