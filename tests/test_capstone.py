@@ -64,13 +64,18 @@ def _sign_predict(x, P, u, dt, Q, vehicle):
     return x, 0.5 * (P + P.T)
 
 
-def _no_wrap_update(x, P, z, idx, R):
+def _stacked(x, z, idx, R):
+    """z (m, 2), the predicted zhat (m, 2), the stacked H (2m, n) and R (2m, 2m)."""
     z, idx = np.asarray(z, float).reshape(-1, 2), np.asarray(idx, int)
     zhat, Hp, Hm = observe(x[:3], np.reshape(x[3:], (-1, 2))[idx])
     H = np.zeros((2 * idx.size, len(x)))
     for i, j in enumerate(idx):
         H[2 * i:2 * i + 2, :3], H[2 * i:2 * i + 2, 3 + 2 * j:5 + 2 * j] = Hp[i], Hm[i]
-    Rm = np.kron(np.eye(idx.size), R)
+    return z, zhat, H, np.kron(np.eye(idx.size), R)
+
+
+def _no_wrap_update(x, P, z, idx, R):
+    z, zhat, H, Rm = _stacked(x, z, idx, R)
     K, _ = kalman_gain(P, H, Rm)
     x = x + K @ (z - zhat).ravel()
     x[2] = (x[2] + math.pi) % (2 * math.pi) - math.pi
@@ -160,12 +165,7 @@ def _no_cross_augment(x, P, z, R):
 
 def _simple_update(x, P, z, idx, R):
     """The update with (I - K H) P instead of the Joseph form: the same for the optimal gain."""
-    z, idx = np.asarray(z, float).reshape(-1, 2), np.asarray(idx, int)
-    zhat, Hp, Hm = observe(x[:3], np.reshape(x[3:], (-1, 2))[idx])
-    H = np.zeros((2 * idx.size, len(x)))
-    for i, j in enumerate(idx):
-        H[2 * i:2 * i + 2, :3], H[2 * i:2 * i + 2, 3 + 2 * j:5 + 2 * j] = Hp[i], Hm[i]
-    Rm = np.kron(np.eye(idx.size), R)
+    z, zhat, H, Rm = _stacked(x, z, idx, R)
     K = P @ H.T @ np.linalg.inv(H @ P @ H.T + Rm)
     nu = z - zhat
     nu[:, 1] = (nu[:, 1] + math.pi) % (2 * math.pi) - math.pi
