@@ -124,6 +124,30 @@ def test_histogram_bars_count_every_error(fitted, bins):
         assert ax.get_title() == f"Error Histogram with {bins} Bins"
 
 
+def test_a_span_bins_the_central_errors_and_counts_the_rest_in_the_end_bins(fitted):
+    ts, sp, model = fitted
+    full = ann.error_histogram(model, ts, sp, bins=20)
+    h = ann.error_histogram(model, ts, sp, bins=20, span=0.9)
+    err = np.concatenate([h["errors"][p] for p in ann.SPLITS])
+    lo, hi = np.quantile(err, [0.05, 0.95])
+    np.testing.assert_allclose(h["edges"][[0, -1]], [lo, hi])
+    assert np.ptp(h["edges"]) < np.ptp(full["edges"])            # narrower bins
+    for p in ann.SPLITS:
+        e = h["errors"][p]
+        assert h["counts"][p].sum() == e.size                      # every error counted once
+        assert h["beyond"][p] == np.count_nonzero((e < lo) | (e > hi))
+        assert h["counts"][p][0] == np.count_nonzero(e < h["edges"][1])
+        assert full["beyond"][p] == 0
+    beyond = sum(h["beyond"].values())
+    assert 0.05 * err.size < beyond < 0.15 * err.size              # about 10 % outside
+    ax = ann_plots.plot_error_histogram(model, ts, sp, bins=20, span=0.9).axes[0]
+    assert ax.get_title() == f"Error Histogram with 20 Bins ({beyond} errors beyond them " \
+        "counted in the end bins)"
+    for bad in (0.0, 1.0, 1.5, "0.9", True):
+        with pytest.raises(ValueError, match="span must be"):
+            ann.error_histogram(model, ts, sp, span=bad)
+
+
 def test_histogram_of_the_inverse_model_is_centred_on_the_bias(fitted):
     # The plain inverse model measures every beacon 0.3 m too far: its errors are NOT
     # centred on zero, while the trained network's are (the correction was learned).

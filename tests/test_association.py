@@ -17,7 +17,7 @@ def test_thresholds_are_the_chi_square_quantiles():
     for p in (0.5, 0.95, 0.99, 0.9999):
         assert gate_threshold(p) == pytest.approx(-2.0 * math.log(1.0 - p), rel=1e-12)
     assert association.GATE == pytest.approx(-2.0 * math.log(0.01), rel=1e-12)          # 9.21
-    assert association.NEW_LANDMARK == pytest.approx(-2.0 * math.log(1e-4), rel=1e-12)  # 18.42
+    assert association.NEW_LANDMARK == pytest.approx(-2.0 * math.log(1e-5), rel=1e-12)  # 23.03
     assert gate_threshold(0.95, dof=1) == pytest.approx(1.959963984540054**2, rel=1e-9)
     for p, dof in ((0.99, 2), (0.9999, 2), (0.95, 3)):
         assert gate_threshold(p, dof) == pytest.approx(chi2.ppf(p, dof), rel=1e-12)

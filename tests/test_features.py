@@ -39,7 +39,7 @@ def test_contiguous_cluster_gives_its_midpoint_mean_range_and_chord():
     assert s.z[0, 1] == pytest.approx(math.radians(50.5), abs=1e-12)  # beam 101 = 50.5 deg
     assert s.level[0] == 3 and s.n_beams[0] == 3 and tuple(s.beams[0]) == (100, 102)
     assert s.width[0] == pytest.approx(3 * STEP * 5.03, rel=1e-12)
-    np.testing.assert_allclose(s.R[0], np.diag([0.05**2, math.radians(1) ** 2]))
+    np.testing.assert_allclose(s.R[0], np.diag([0.1**2, math.radians(1) ** 2]))     # ACFR's
 
 
 def test_single_beam_cluster_and_clusters_at_the_edges_of_the_scan():

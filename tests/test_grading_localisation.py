@@ -123,7 +123,7 @@ def test_nis_verdict_partial_right_only_when_every_update_has_two_dof():
 
 # ----------------------------------------------------------------------------- the grader
 
-MIXED = {   # 4a.1 without the bearing wrap; 4a.2 honest
+MIXED = {   # 4a.1 without the bearing wrap (which the loop of 4a.2 then uses); 4a.3 honest
     "ex04a-beacon-update": "def my_beacon_update(pose, P, z, beacon, R):\n"
                            "    zhat, H, _ = observe(np.asarray(pose, float), np.asarray(beacon, float))\n"
                            "    K, _ = dense.kalman_gain(P, H, R)\n"
@@ -140,12 +140,17 @@ def test_the_grader_scores_honest_and_mixed_submissions_of_the_chapter(tmp_path)
     results = {name: gs.grade_chapter(NOTEBOOK, sub, tmp_path / name, limits)
                for name, sub in [("honest", bodies), ("mixed", {**bodies, **MIXED})]}
     honest, mixed = results["honest"], results["mixed"]
-    assert (honest.score, honest.max_score) == (5, 5), honest.report()
+    assert (honest.score, honest.max_score) == (10, 10), honest.report()
     assert honest.errors == [], honest.report()
-    assert (mixed.score, mixed.max_score) == (2, 5), mixed.report()
+    assert (mixed.score, mixed.max_score) == (3, 10), mixed.report()
     got = {r.grade_id: (r.points, r.status) for r in mixed.exercises}
     assert got == {"ex04a-beacon-update-tests": (0, "failed"),
+                   "ex04a-filter-runs-tests": (1, "passed"),
+                   "ex04a-filter-consistency-tests": (0, "failed"),
+                   "ex04a-filter-path-tests": (0, "failed"),
                    "ex04a-nis-verdict-tests": (2, "passed")}, mixed.report()
-    msg = next(r.message for r in mixed.exercises if r.grade_id == "ex04a-beacon-update-tests")
-    assert "does not wrap the bearing innovation" in msg
+    for gid in ("ex04a-beacon-update-tests", "ex04a-filter-consistency-tests",
+                "ex04a-filter-path-tests"):
+        msg = next(r.message for r in mixed.exercises if r.grade_id == gid)
+        assert "does not wrap the bearing innovation" in msg, (gid, msg)
     assert math.isfinite(honest.seconds)

@@ -44,3 +44,21 @@ def test_the_estimate_follows_its_stated_assumptions():
     assert r["points"] == 9 and r["ungraded"] == []
     assert r["exercise_min"] == 5 * round(9 * pacing.MINUTES_PER_POINT / 5)
     assert abs(r["reading_min"] - r["words"] / pacing.WORDS_PER_MINUTE) <= 2.5
+
+
+def test_the_optional_modules_add_up_and_the_guide_and_map_name_them():
+    rows = pacing.chapter_rows(NOTEBOOKS)
+    assert {r["notebook"] for r in rows if r["module"] == "paper"} == \
+        {"07_ann_training", "08_ann_slam_verdict"}
+    table = pacing.pacing_table(NOTEBOOKS)
+    hours = {m.group(1): float(m.group(2)) for m in
+             re.finditer(r"^\| (core(?: \+ \w+)?|all) \|.*\| ([\d.]+) \|$", table, re.M)}
+    minutes = {m: sum(r["total_min"] for r in rows if r["module"] == m)
+               for m in ("core", *pacing.OPTIONAL_MODULES)}
+    assert hours["core"] == round(minutes["core"] / 60, 1)
+    assert hours["core + paper"] == round((minutes["core"] + minutes["paper"]) / 60, 1)
+    assert hours["all"] == round(sum(minutes.values()) / 60, 1)
+    plans = GUIDE.split("## Two plans", 1)[1].split("\n## ", 1)[0]
+    assert "without the paper module" in plans and "core only" in plans
+    course_map = (ROOT / "notebooks" / "00_course_map.ipynb").read_text()
+    assert "(optional: the paper module)" in course_map and "The paper thread" in course_map

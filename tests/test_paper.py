@@ -141,3 +141,15 @@ def test_errata_markdown_below_layout_by_key():
         paper.errata_markdown(keys, formulas="beside")
     with pytest.raises((KeyError, ValueError), match="no-such-erratum"):
         paper.errata_markdown(["no-such-erratum"])
+
+
+def test_a_collapsed_errata_table_is_the_same_table_in_a_closed_box():
+    keys = ["4.1-Pl-vector", "4.1-full-x", "4.1-full-y", "4.1-Pl-scalar", "4.1-full-phi"]
+    table = paper.errata_markdown(keys, formulas="below")
+    boxed = paper.errata_markdown(keys, formulas="below", collapsed=True)
+    assert boxed.startswith("<details>\n<summary>") and boxed.endswith("</details>")
+    assert "<details open" not in boxed and f"\n\n{table}\n\n" in boxed
+    kinds = [r["kind"] for r in paper.errata_table(keys)]
+    wrong, right = sum(k != "correct" for k in kinds), kinds.count("correct")
+    assert (wrong, right) == (3, 2)
+    assert f"{wrong} misprints, {right} confirmed" in boxed

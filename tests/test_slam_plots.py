@@ -17,6 +17,7 @@ from annslam_lib.slam.config import SlamConfig  # noqa: E402
 from annslam_lib.data import simulate
 from annslam_lib.evaluation import consistency
 from annslam_lib.plots import slam as slam_plots
+from annslam_lib.plots import style
 from annslam_lib.slam import runner
 
 
@@ -157,7 +158,7 @@ def test_true_vs_mapped_draws_paths_landmarks_and_2_sigma_ellipses(sim_run):
     np.testing.assert_array_equal(lines["mapped landmarks"].get_xydata(), r.landmarks)
     np.testing.assert_array_equal(ax.collections[0].get_offsets(), ds.beacons)
     # one closed curve per landmark, every point at Mahalanobis distance 2 from it
-    ellipses = [ln for ln in ax.get_lines() if ln.get_linestyle() == "-" and ln.get_color() == "tab:blue"]
+    ellipses = [ln for ln in ax.get_lines() if ln.get_linestyle() == "-" and ln.get_color() == style.BLUE]
     assert len(ellipses) == len(r.landmarks)
     for ln, m, P in zip(ellipses, r.landmarks, r.landmark_cov):
         d = ln.get_xydata() - m
@@ -170,10 +171,10 @@ def test_true_vs_mapped_draws_paths_landmarks_and_2_sigma_ellipses(sim_run):
 def test_true_vs_mapped_ellipse_scale_and_overlay(sim_run):
     ds, r = sim_run
     ax = slam_plots.plot_true_vs_mapped(r, ds, ellipse_scale=10.0, legend=None)
-    ax = slam_plots.plot_true_vs_mapped(r, ds, ax=ax, show_truth=False, color="tab:green",
+    ax = slam_plots.plot_true_vs_mapped(r, ds, ax=ax, show_truth=False, color=style.GREEN,
                                         label="other", legend="lower left")
-    blue = [ln for ln in ax.get_lines() if ln.get_color() == "tab:blue" and ln.get_linestyle() == "-"]
-    green = [ln for ln in ax.get_lines() if ln.get_color() == "tab:green" and ln.get_linestyle() == "-"]
+    blue = [ln for ln in ax.get_lines() if ln.get_color() == style.BLUE and ln.get_linestyle() == "-"]
+    green = [ln for ln in ax.get_lines() if ln.get_color() == style.GREEN and ln.get_linestyle() == "-"]
     # x10 magnified: ten times as far from the centre as the unmagnified overlay
     ratio = (np.linalg.norm(blue[0].get_xydata() - r.landmarks[0], axis=1)
              / np.linalg.norm(green[0].get_xydata() - r.landmarks[0], axis=1))

@@ -129,23 +129,48 @@ def _outputs(model, ts: TrainingSet, idx, kind: str):
 
 
 
-def error_histogram(model, ts: TrainingSet, split: Split, bins: int = 20) -> dict:
-    """nntool's error histogram (paper Figure 6): errors = target - output per coordinate
-    (m), ``bins`` equal bins over the range of all parts together. Returns dict(edges
-    (bins + 1,), centres, counts = {part: (bins,)}, errors = {part: (2 n,)})."""
+def error_histogram(model, ts: TrainingSet, split: Split, bins: int = 20, *,
+                    span: float | None = None) -> dict:
+    """nntool's error histogram (paper Figure 6, chapter 07): errors = target - output per
+    coordinate (m), in ``bins`` equal bins stacked by part.
+
+    Parameters
+    ----------
+    span : None or float in (0, 1)
+        None: the bins cover the range of all errors, as nntool's do (one stray error can
+        squash the rest into a few bins). A share such as 0.99: the bins cover the central
+        ``span`` of all errors (their quantiles (1 - span) / 2 and (1 + span) / 2), and each
+        error beyond is counted in the end bin on its side.
+
+    Returns
+    -------
+    dict
+        edges (bins + 1,), centres, counts {part: (bins,)} (every error counted once),
+        errors {part: (2 n,)} and beyond {part: int}, the errors counted in an end bin
+        although they lie outside it (0 when ``span`` is None).
+    """
     if isinstance(bins, bool) or not isinstance(bins, numbers.Integral) or bins < 1:
         raise ValueError(f"bins must be a positive integer, got {bins!r}")
+    if span is not None and not (isinstance(span, numbers.Real) and 0.0 < span < 1.0):
+        raise ValueError(f"span must be None or a share strictly between 0 and 1, got {span!r}")
     errors = {}
     for p in SPLITS:
         out, tgt = _outputs(model, ts, split.part(p), "position")
         errors[p] = (tgt - out).ravel()
     allerr = np.concatenate(list(errors.values()))
-    lo, hi = (float(allerr.min()), float(allerr.max())) if allerr.size else (-1.0, 1.0)
+    if not allerr.size:
+        lo, hi = -1.0, 1.0
+    elif span is None:
+        lo, hi = float(allerr.min()), float(allerr.max())
+    else:
+        lo, hi = (float(q) for q in np.quantile(allerr, [(1 - span) / 2, (1 + span) / 2]))
     if hi <= lo:
         lo, hi = lo - 0.5, hi + 0.5
     edges = np.linspace(lo, hi, bins + 1)
-    counts = {p: np.histogram(e, bins=edges)[0] for p, e in errors.items()}
-    return dict(edges=edges, centres=0.5 * (edges[1:] + edges[:-1]), counts=counts, errors=errors)
+    counts = {p: np.histogram(np.clip(e, lo, hi), bins=edges)[0] for p, e in errors.items()}
+    beyond = {p: int(np.count_nonzero((e < lo) | (e > hi))) for p, e in errors.items()}
+    return dict(edges=edges, centres=0.5 * (edges[1:] + edges[:-1]), counts=counts, errors=errors,
+                beyond=beyond)
 
 
 

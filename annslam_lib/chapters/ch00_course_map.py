@@ -6,7 +6,7 @@ from ipywidgets import IntSlider, interactive
 
 from ..data.records import Dataset, Laser
 from ..plots.data import plot_detections_polar, plot_gps_gaps, plot_map, plot_scan_vehicle_frame
-from ..plots.style import figure, show_widget_figure, widget_figure
+from ..plots.style import GREEN, ORANGE, RED, figure, show_widget_figure, widget_figure
 from ..plots.style import notebook_setup as setup
 
 __all__ = ["setup", "scan_summary", "scan_readout", "scan_scrubber", "car_park_figure",
@@ -22,12 +22,12 @@ def car_park_figure(car: Dataset):
         ax.remove()
     ax_map = fig.add_subplot(gs[:, 0])
     plot_map(car, ax=ax_map)
-    ax_map.legend(loc="lower right", fontsize=8)
+    ax_map.legend(loc="lower right")
     ax_map.set(xlim=(-10, 20), ylim=(-25, 20), title="GPS track and surveyed beacons")
     odo = car.odometry
     axs[0, 1].plot(odo.t, odo.speed, lw=0.8)
     axs[0, 1].set(ylabel="encoder speed [m/s]", title="what the car logged")
-    axs[1, 1].plot(odo.t, np.degrees(odo.steering), lw=0.8, color="tab:orange")
+    axs[1, 1].plot(odo.t, np.degrees(odo.steering), lw=0.8, color=ORANGE)
     axs[1, 1].set(xlabel="time [s]", ylabel="steering [deg]")
     for ax in axs[:, 1]:
         ax.grid(True, alpha=0.3)
@@ -43,7 +43,7 @@ def scan_figure(laser: Laser, k: int, vehicle, *, max_range: float = 20.0):
     ok = r < laser.max_range
     deg = np.degrees(laser.angles)
     ax1.plot(deg[ok], r[ok], ".", ms=3, color="0.5", label="return")
-    ax1.scatter(deg[ok & (level > 0)], r[ok & (level > 0)], s=14, color="tab:red", zorder=4,
+    ax1.scatter(deg[ok & (level > 0)], r[ok & (level > 0)], s=14, color=RED, zorder=4,
                 label="high intensity (tape)")
     ax1.set(xlabel="beam angle [deg] (0 = right, 90 = ahead)", ylabel="range [m]",
             xlim=(0, 180), title=f"the same scan, {np.count_nonzero(ok)} of {r.size} beams return")
@@ -60,7 +60,7 @@ def gps_gaps_figure(ds: Dataset, *, min_gap: float = 2.0):
     ax0.set_title("the track, broken at its gaps")
     dt = np.diff(ds.gps.t)
     ax1.semilogy(ds.gps.t[1:], dt, ".", ms=2)
-    ax1.axhline(min_gap, color="tab:red", ls=":", label=f"{min_gap:g} s")
+    ax1.axhline(min_gap, color=RED, ls=":", label=f"{min_gap:g} s")
     ax1.set(xlabel="time [s]", ylabel="time since the previous fix [s]",
             title="time between GPS fixes")
     ax1.grid(True, which="both", alpha=0.3)
@@ -78,7 +78,7 @@ def trees_figure(ds: Dataset, k: int = 0):
     plot_detections_polar(z[:, 0], z[:, 1], ax=ax0, sizes=2000 * d,
                           title=f"scan {k}: {len(z)} trees (marker area ~ trunk diameter)")
     per = det.per_scan()
-    ax1.hist(per, bins=np.arange(per.max() + 2) - 0.5, color="tab:green", alpha=0.8)
+    ax1.hist(per, bins=np.arange(per.max() + 2) - 0.5, color=GREEN, alpha=0.8)
     ax1.set(xlabel="trees in a scan", ylabel="scans", title=f"{len(det)} scans")
     ax1.grid(True, alpha=0.3)
     return fig
@@ -90,7 +90,7 @@ def simulated_run_figure(sim: Dataset):
     fig, (ax0, ax1) = figure(1, 2, height=4.8, width_ratios=[1.5, 1])
     plot_map(sim, ax=ax0, gps_label="GPS (noisy)", beacon_label="true beacons")
     ax0.plot(sim.truth.poses[:, 1], sim.truth.poses[:, 2], "k-", lw=0.8, label="true path")
-    ax0.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=4, fontsize=8)
+    ax0.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=4)
     ax0.set_title("true path, GPS, beacons")
     ax1.plot(sim.detections.t, sim.detections.per_scan(), ".", ms=3)
     ax1.set(xlabel="time [s]", ylabel="beacons detected", title="detections per scan")

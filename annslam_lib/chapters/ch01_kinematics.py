@@ -18,7 +18,7 @@ from ..evaluation.trajectory import TrajectoryErrors
 from ..plots.data import car_outline
 from ..models.vehicle import ACFR_UTE, Vehicle
 from ..plots.blit import Blit, drawn_by
-from ..plots.style import FIG_WIDTH, figure, show_png, widget_figure
+from ..plots.style import BLUE, FIG_WIDTH, GREEN, ORANGE, RED, figure, show_png, widget_figure
 from ..plots.style import notebook_setup as setup
 
 __all__ = ["setup", "circumradius", "arc_vs_euler", "plot_arc_vs_euler", "kinematics_readout",
@@ -89,7 +89,7 @@ def plot_arc_vs_euler(summary: dict, ax=None):
     """Draw a result of :func:`arc_vs_euler`: exact arcs as lines, Euler steps as dots."""
     if ax is None:
         _, ax = plt.subplots(figsize=(6, 6))
-    for name, color in (("laser", "tab:red"), ("axle", "tab:blue")):
+    for name, color in (("laser", RED), ("axle", BLUE)):
         ex, eu = summary[f"exact_{name}"], summary[f"euler_{name}"]
         ax.plot(ex[:, 0], ex[:, 1], "-", color=color, lw=1.5, label=f"{name}: exact arc")
         ax.plot(eu[:, 0], eu[:, 1], "o--", color=color, ms=4, lw=0.8, alpha=0.7,
@@ -97,7 +97,7 @@ def plot_arc_vs_euler(summary: dict, ax=None):
                       f"(end off by {100 * summary[f'error_{name}']:.1f} cm)")
     ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal")
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8, loc="best")
+    ax.legend(loc="best")
     return ax
 
 
@@ -201,22 +201,22 @@ def plot_turning_geometry(vehicle: Vehicle = ACFR_UTE, steering: float = 0.35, a
     ax.plot([0, 0], [-H, R], "k:", lw=0.8)                        # rear-axle line
     ax.plot([L, 0], [0, R], "k:", lw=0.8)                         # normal to the front wheel
     ang = np.linspace(-math.pi / 2 - 0.35, -math.pi / 2 + 0.55, 60)
-    marks = (("C (axle centre)", (0.0, 0.0), "tab:blue"),
-             ("encoder wheel", (0.0, H), "tab:green"),
-             ("laser", (a, b), "tab:red"))
-    for label, (x, y), color in marks:
+    marks = (("C (axle centre)", (0.0, 0.0), BLUE, "o"),
+             ("encoder wheel", (0.0, H), GREEN, "s"),
+             ("laser", (a, b), RED, "^"))
+    for label, (x, y), color, marker in marks:
         r = math.hypot(x, R - y)
-        ax.plot(r * np.cos(ang), R + r * np.sin(ang), "-", color=color, lw=1,
-                label=f"{label}: radius {r:.2f} m")
+        ax.plot(r * np.cos(ang), R + r * np.sin(ang), "-", color=color, lw=1, marker=marker,
+                markevery=[len(ang) - 1], ms=6, label=f"{label}: radius {r:.2f} m")
         ax.plot([0, x], [R, y], "--", color=color, lw=0.8)
-        ax.plot(x, y, "o", color=color, ms=6)
+        ax.plot(x, y, marker, color=color, ms=6)
     ax.plot(0, R, "k+", ms=12, mew=2)
     ax.annotate(f"ICR (0, R), R = L / tan(alpha) = {R:.2f} m", (0, R), xytext=(6, -4),
                 textcoords="offset points", fontsize=9)
     ax.set(xlabel="x forward [m]", ylabel="y left [m]", aspect="equal",
            xlim=(-3, a + 2.5), ylim=(-2.5, R + 1.5),
            title=f"Turning circle at steering alpha = {steering:.2f} rad")
-    ax.legend(fontsize=8, loc="lower right")
+    ax.legend(loc="lower right")
     return ax
 
 
@@ -227,10 +227,10 @@ def plot_paths(gps, paths: dict, ax=None, *, title: str = ""):
     ax.plot(gps.east, gps.north, ".", ms=2, color="k", label="GPS (laser point)")
     for label, traj in paths.items():
         ax.plot(traj[:, 1], traj[:, 2], "-", lw=1.2, label=label)
-    ax.plot(gps.east[0], gps.north[0], "o", color="tab:green", ms=8, label="start")
+    ax.plot(gps.east[0], gps.north[0], "o", color=GREEN, ms=8, label="start")
     ax.set(xlabel="East x [m]", ylabel="North y [m]", aspect="equal", title=title)
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8, loc="best")
+    ax.legend(loc="best")
     return ax
 
 
@@ -242,7 +242,7 @@ def plot_errors(errors: dict[str, TrajectoryErrors], ax=None, *, title: str = ""
         ax.plot(e.t, e.error, lw=1.2, label=f"{label} (RMSE {e.rmse:.2f} m)")
     ax.set(xlabel="time [s]", ylabel="position error [m]", title=title)
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8, loc="best")
+    ax.legend(loc="best")
     return ax
 
 
@@ -253,10 +253,10 @@ def turning_geometry_figure(vehicle: Vehicle = ACFR_UTE, steering: float = 0.35)
     plot_turning_geometry(vehicle, steering, ax=ax0)
     alpha = np.linspace(0.05, 0.6, 200)
     R = vehicle.L / np.tan(alpha)
-    for label, r, color in (("C (axle centre): R", R, "tab:blue"),
-                            ("encoder wheel: R - H", R - vehicle.H, "tab:green"),
-                            ("laser", np.hypot(vehicle.a, R - vehicle.b), "tab:red")):
-        ax1.semilogy(alpha, r, color=color, label=label)
+    for label, r, color, style in (("C (axle centre): R", R, BLUE, "-"),
+                                   ("encoder wheel: R - H", R - vehicle.H, GREEN, "--"),
+                                   ("laser", np.hypot(vehicle.a, R - vehicle.b), RED, "-.")):
+        ax1.semilogy(alpha, r, style, color=color, label=label)
     ax1.axvline(steering, color="0.5", ls=":", label=f"the drawing, {steering:.2f} rad")
     ax1.set(xlabel="steering alpha [rad] (left turn)", ylabel="radius [m]",
             title="every point of the car on its own circle")
@@ -288,7 +288,7 @@ def euler_error_figure(dts, local, horizon_error, *, speed: float = 2.0, steerin
     s = arc_vs_euler(speed, steering, 0.2, vehicle, horizon=horizon)
     plot_arc_vs_euler(s, ax1)
     ax1.set_title(f"the paths at dt = 0.2 s over {horizon:g} s")
-    ax1.legend(loc="upper center", bbox_to_anchor=(0.5, -0.15), ncol=2, fontsize=8)
+    ax1.legend(loc="upper center", bbox_to_anchor=(0.5, -0.15), ncol=2)
     return fig
 
 
@@ -328,7 +328,7 @@ def heading_drift_figure(t_gps, heading_error_deg, odometry):
     ax0.plot(t_gps, heading_error_deg, ".", ms=3)
     ax0.set(ylabel="heading error [deg]",
             title="Heading drift of dead reckoning (dead-reckoned minus GPS heading)")
-    ax1.plot(odometry.t, odometry.steering, color="tab:orange", lw=0.8)
+    ax1.plot(odometry.t, odometry.steering, color=ORANGE, lw=0.8)
     ax1.axhline(0.59, color="0.5", ls=":", lw=0.8)
     ax1.set(xlabel="time [s]", ylabel="steering [rad]")
     for ax in (ax0, ax1):

@@ -13,7 +13,7 @@ from ipywidgets import FloatSlider, interactive
 
 from .. import _checks
 from ..models.uncertainty import ellipse_points
-from ..plots.style import figure, show_widget_figure, widget_figure
+from ..plots.style import BLUE, GREEN, ORANGE, RED, figure, show_widget_figure, widget_figure
 from ..plots.style import notebook_setup as setup
 from ..slam import kalman
 from ..slam.dense import joseph_covariance, kalman_gain
@@ -60,9 +60,9 @@ def one_d_figure(ex: dict):
     prior, pred, post = ex["grid_densities"]
     show = (g > ex["mu0"] - 2.0) & (g < ex["mu0"] + ex["u"] + 2.5)
     curves = [("prior N(%.1f, %.2f)" % (ex["mu0"], ex["var0"]), ex["mu0"], ex["var0"], "0.5", prior),
-              ("predicted", *ex["predicted"], "tab:blue", pred),
-              ("GPS likelihood", ex["z"], ex["r"], "tab:orange", None),
-              ("posterior", *ex["posterior"], "tab:green", post)]
+              ("predicted", *ex["predicted"], BLUE, pred),
+              ("GPS likelihood", ex["z"], ex["r"], ORANGE, None),
+              ("posterior", *ex["posterior"], GREEN, post)]
     for label, m, v, color, dens in curves:
         ax.plot(g[show], kalman.gaussian_pdf(g[show], m, v), color=color, lw=2,
                 ls="--" if dens is None else "-", label=f"{label}: σ = {math.sqrt(v):.2f} m")
@@ -71,7 +71,7 @@ def one_d_figure(ex: dict):
     ax.plot([], [], ".", color="k", label="Bayes filter on a grid")
     ax.set(xlabel="position along the road [m]", ylabel="density [1/m]",
            title="a prediction widens, an update narrows")
-    ax.legend(loc="upper left", fontsize=8)
+    ax.legend(loc="upper left")
     ax.grid(True, alpha=0.3)
     return fig
 
@@ -112,19 +112,19 @@ def random_walk_figure(walk: dict):
     fig, (ax0, ax1) = figure(1, 2, height=3.6)
     k = np.arange(1, walk["z"].size + 1)
     sd = np.sqrt(walk["var"])
-    ax0.fill_between(k, -2 * sd, 2 * sd, color="tab:green", alpha=0.2, label="filter ±2σ")
-    ax0.plot(k, walk["z"] - walk["truth"], "x", color="tab:orange", ms=5, label="measurement − truth")
-    ax0.plot(k, walk["mean"] - walk["truth"], "o-", color="tab:green", ms=3, label="estimate − truth")
+    ax0.fill_between(k, -2 * sd, 2 * sd, color=GREEN, alpha=0.2, label="filter ±2σ")
+    ax0.plot(k, walk["z"] - walk["truth"], "x", color=ORANGE, ms=5, label="measurement − truth")
+    ax0.plot(k, walk["mean"] - walk["truth"], "o-", color=GREEN, ms=3, label="estimate − truth")
     ax0.axhline(0, color="k", lw=0.6)
     ax0.set(xlabel="step", ylabel="error [m]", title="errors against the truth")
-    ax0.legend(fontsize=8, loc="lower right")
+    ax0.legend(loc="lower right")
     saw_k = np.repeat(k, 2)
     saw_v = np.column_stack([walk["prior_var"], walk["var"]]).ravel()
-    ax1.plot(saw_k, saw_v, color="tab:blue", lw=1.2, label="variance: predict ↑, update ↓")
-    ax1.axhline(walk["p_minus"], color="tab:blue", ls=":", label=f"p− = {walk['p_minus']:.4f}")
-    ax1.axhline(walk["p_plus"], color="tab:green", ls=":", label=f"p+ = {walk['p_plus']:.4f}")
+    ax1.plot(saw_k, saw_v, color=BLUE, lw=1.2, label="variance: predict ↑, update ↓")
+    ax1.axhline(walk["p_minus"], color=BLUE, ls=":", label=f"p− = {walk['p_minus']:.4f}")
+    ax1.axhline(walk["p_plus"], color=GREEN, ls=":", label=f"p+ = {walk['p_plus']:.4f}")
     ax1.set(xlabel="step", ylabel="variance [m²]", yscale="log", title="where the variance settles")
-    ax1.legend(fontsize=8)
+    ax1.legend()
     for ax in (ax0, ax1):
         ax.grid(True, alpha=0.3)
     return fig
@@ -165,16 +165,16 @@ def position_velocity_example(dt=1.0, sigma_a=0.5, r=4.0, n_steps=5, z_next=None
 def position_velocity_figure(ex: dict):
     """The 2-sigma ellipses of (position, velocity) before and after the GPS update."""
     fig, ax = figure(height=3.8)
-    for x, P, color, label in [(ex["x_prior"], ex["P_prior"], "tab:blue", "predicted"),
-                               (ex["x_post"], ex["P_post"], "tab:green", "after the GPS fix")]:
+    for x, P, color, label in [(ex["x_prior"], ex["P_prior"], BLUE, "predicted"),
+                               (ex["x_post"], ex["P_post"], GREEN, "after the GPS fix")]:
         e = ellipse_points(x, P, 2.0)
         ax.plot(*e.T, color=color, label=f"{label} (2σ)")
         ax.plot(*x, "o", color=color)
-    ax.axvline(float(ex["z"][0]), color="tab:orange", ls="--", label="GPS position")
+    ax.axvline(float(ex["z"][0]), color=ORANGE, ls="--", label="GPS position")
     ax.plot(*ex["truth"], "k*", ms=10, label="truth")
     ax.set(xlabel="position [m]", ylabel="velocity [m/s]",
            title="a position fix also corrects the velocity (correlation %+.2f)" % ex["correlation"])
-    ax.legend(fontsize=8)
+    ax.legend()
     ax.grid(True, alpha=0.3)
     return fig
 
@@ -280,15 +280,15 @@ def linearisation_figure(cases: list[dict]):
     for ax, c in zip(np.atleast_1d(axs), cases):
         g = c["grid"]
         ax.plot(g, kalman.gaussian_pdf(g, c["x0"], c["var0"]), color="0.6", label="prior")
-        ax.fill_between(g, c["density"], color="tab:green", alpha=0.35, label="exact posterior")
+        ax.fill_between(g, c["density"], color=GREEN, alpha=0.35, label="exact posterior")
         m, v = c["ekf"]
-        ax.plot(g, kalman.gaussian_pdf(g, m, v), color="tab:red", lw=1.5, label="EKF posterior")
+        ax.plot(g, kalman.gaussian_pdf(g, m, v), color=RED, lw=1.5, label="EKF posterior")
         sd = math.sqrt(c["var0"])
         ax.set(xlabel="position along the road [m]", xlim=(c["x0"] - 4 * sd - 1, c["x0"] + 4 * sd + 1),
                title=f"prior at {c['x0']:.1f} m: H = {c['H']:.2f}")
         ax.grid(True, alpha=0.3)
     np.atleast_1d(axs)[0].set_ylabel("density [1/m]")
-    np.atleast_1d(axs)[0].legend(fontsize=8, loc="upper left")
+    np.atleast_1d(axs)[0].legend(loc="upper left")
     return fig
 
 
@@ -306,15 +306,15 @@ def draw_update(s: dict, ax) -> None:
     lo = min(s["mu"] - 4 * math.sqrt(s["var"]), s["z"] - 4 * math.sqrt(max(s["r"], 1e-6)))
     hi = max(s["mu"] + 4 * math.sqrt(s["var"]), s["z"] + 4 * math.sqrt(max(s["r"], 1e-6)))
     g = np.linspace(lo, hi, 400)
-    for m, v, color, label in [(s["mu"], s["var"], "tab:blue", "prior"),
-                               (s["z"], s["r"], "tab:orange", "measurement"),
-                               (s["mu_post"], s["var_post"], "tab:green", "posterior")]:
+    for m, v, color, label in [(s["mu"], s["var"], BLUE, "prior"),
+                               (s["z"], s["r"], ORANGE, "measurement"),
+                               (s["mu_post"], s["var_post"], GREEN, "posterior")]:
         if v > 0:
             ax.plot(g, kalman.gaussian_pdf(g, m, v), color=color, lw=2, label=label)
         else:
             ax.axvline(m, color=color, lw=2, label=f"{label} (exact)")
     ax.set(xlabel="x [m]", ylabel="density", title=f"K = {s['K']:.2f}")
-    ax.legend(fontsize=8, loc="upper right")
+    ax.legend(loc="upper right")
     ax.grid(True, alpha=0.3)
 
 

@@ -23,7 +23,7 @@ from ..models.geometry import rot
 from ..models.geometry import interpolate_poses
 from ..plots.data import car_outline
 from ..plots.blit import Blit, drawn_by
-from ..plots.style import figure, show_png, widget_figure
+from ..plots.style import BLUE, GREEN, PURPLE, RED, figure, show_png, widget_figure
 from ..data.records import Dataset, Odometry
 from ..models.vehicle import Vehicle
 from ..plots.style import notebook_setup as setup
@@ -162,21 +162,21 @@ def plot_offset_geometry(vehicle: Vehicle, phi: float = np.radians(30.0), ax=Non
         _, ax = plt.subplots(figsize=(6, 5))
     R = rot(phi)
     body = car_outline(vehicle) @ R.T
-    ax.fill(body[:, 0], body[:, 1], color="tab:blue", alpha=0.2, label="car body")
+    ax.fill(body[:, 0], body[:, 1], color=BLUE, alpha=0.2, label="car body")
     ends = np.array([[0.0, -0.85], [0.0, 0.85], [vehicle.L, -0.85], [vehicle.L, 0.85]]) @ R.T
     ax.plot(ends[:2, 0], ends[:2, 1], "k-", lw=2)
     ax.plot(ends[2:, 0], ends[2:, 1], "k-", lw=2, label=f"axles (L = {vehicle.L} m)")
     tip_a = vehicle.a * R[:, 0]
     laser = tip_a + vehicle.b * R[:, 1]
     arrow = dict(length_includes_head=True, head_width=0.12, lw=1.5)
-    ax.arrow(0, 0, *tip_a, color="tab:green", **arrow)
-    ax.arrow(*tip_a, *(laser - tip_a), color="tab:purple", **arrow)
+    ax.arrow(0, 0, *tip_a, color=GREEN, **arrow)
+    ax.arrow(*tip_a, *(laser - tip_a), color=PURPLE, **arrow)
     ax.annotate(r"$a\,T(\phi)$", tip_a / 2, xytext=(6, -14), textcoords="offset points",
-                color="tab:green")
+                color=GREEN)
     ax.annotate(r"$b\,T(\phi+\pi/2)$", laser, xytext=(-40, 10), textcoords="offset points",
-                color="tab:purple")
+                color=PURPLE)
     ax.plot(0, 0, "k+", ms=12, mew=2, label="C (rear-axle centre)")
-    ax.plot(*laser, "r^", ms=9, label="laser (and GPS antenna)")
+    ax.plot(*laser, "^", color=RED, ms=9, label="laser (and GPS antenna)")
     arc = np.linspace(0, phi, 30)
     ax.plot([0, 2.0], [0, 0], "k:", lw=1)
     ax.plot(1.6 * np.cos(arc), 1.6 * np.sin(arc), "k-", lw=1)
@@ -184,7 +184,7 @@ def plot_offset_geometry(vehicle: Vehicle, phi: float = np.radians(30.0), ax=Non
     ax.set(xlabel="East x [m]", ylabel="North y [m]", aspect="equal",
            title=f"laser offset: a = {vehicle.a} m ahead, b = {vehicle.b} m left of C")
     ax.grid(True, alpha=0.3)
-    ax.legend(loc="lower right", fontsize=8)
+    ax.legend(loc="lower right")
     return ax
 
 
@@ -203,17 +203,17 @@ def plot_offset_stretch(stretch: Stretch, a: float, b: float, *, align: bool = T
     ax, ax2 = axes
     fig = ax.figure
     ax.plot(p["axle"][:, 0], p["axle"][:, 1], "-", color="0.4", label="rear axle (dead reckoning)")
-    ax.plot(p["laser"][:, 0], p["laser"][:, 1], "-", color="tab:red",
+    ax.plot(p["laser"][:, 0], p["laser"][:, 1], "-", color=RED,
             label=f"laser for a = {a:.2f}, b = {b:.2f}")
-    ax.plot(stretch.gps_xy[:, 0], stretch.gps_xy[:, 1], ".", ms=4, color="tab:blue", label="GPS")
+    ax.plot(stretch.gps_xy[:, 0], stretch.gps_xy[:, 1], ".", ms=4, color=BLUE, label="GPS")
     for k in np.linspace(0, len(p["t"]) - 1, 6).astype(int):
         ax.plot([p["axle"][k, 0], p["laser"][k, 0]], [p["axle"][k, 1], p["laser"][k, 1]],
-                "-", color="tab:purple", lw=0.8)
+                "-", color=PURPLE, lw=0.8)
     ax.set(xlabel="East x [m]", ylabel="North y [m]", aspect="equal",
            title=f"t = {p['t'][0]:.1f} .. {p['t'][-1]:.1f} s (purple: lever arm)")
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8, loc="best")
-    ax2.plot(stretch.gps_t, p["error"], "-", color="tab:red")
+    ax.legend(loc="best")
+    ax2.plot(stretch.gps_t, p["error"], "-", color=RED)
     ax2.set(xlabel="time [s]", ylabel="distance laser path - GPS [m]",
             title=f"RMS {s['rms']:.3f} m; best fit a = {best[0]:.2f}, b = {best[1]:.2f}: "
                   f"{best_rms:.3f} m")
@@ -243,11 +243,11 @@ def plot_rms_surface(stretch: Stretch, a_values, b_values, *, vehicle: Vehicle |
     best = best_offset(stretch, align=align)
     ax.plot(*best, "ko", label=f"best fit ({best[0]:.2f}, {best[1]:.2f})")
     if vehicle is not None:
-        ax.plot(vehicle.a, vehicle.b, "r^", ms=9, label=f"ACFR ({vehicle.a}, {vehicle.b})")
+        ax.plot(vehicle.a, vehicle.b, "^", color=RED, ms=9, label=f"ACFR ({vehicle.a}, {vehicle.b})")
     ax.set(xlabel="a [m] (ahead of the rear axle)", ylabel="b [m] (to the left)",
            title="RMS distance laser path - GPS")
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8, loc="lower right")
+    ax.legend(loc="lower right")
     return ax
 
 
@@ -323,8 +323,8 @@ def slip_figure(t_gps, slip_gps_deg, t_model, slip_model_deg):
     """The laser's slip angle (course minus heading) along a turn: measured by GPS and
     predicted by the model, against zero (the offset ignored)."""
     fig, ax = figure(height=3.8)
-    ax.plot(t_gps, slip_gps_deg, ".", color="tab:blue", label="GPS course − heading (measured)")
-    ax.plot(t_model, slip_model_deg, "-", color="tab:red", label="model, a = 3.78, b = 0.50")
+    ax.plot(t_gps, slip_gps_deg, ".", color=BLUE, label="GPS course − heading (measured)")
+    ax.plot(t_model, slip_model_deg, "-", color=RED, label="model, a = 3.78, b = 0.50")
     ax.axhline(0, color="0.4", lw=1.5, label="model with the offset ignored (a = b = 0)")
     ax.set(xlabel="time [s]", ylabel="slip angle of the laser [deg]",
            title="The laser point side-slips in a turn; the rear axle does not")

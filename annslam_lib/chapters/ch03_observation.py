@@ -22,7 +22,7 @@ from ..models.geometry import wrap_angle
 from ..evaluation.residuals import ROUNDING
 from ..models.observation import observe
 from ..plots.blit import Blit, drawn_by
-from ..plots.style import figure, show_png, widget_figure
+from ..plots.style import BLUE, GREEN, ORANGE, PURPLE, RED, figure, show_png, widget_figure
 from ..models.uncertainty import coverage, draw_ellipse, expected_coverage, monte_carlo, propagate
 from ..plots.style import notebook_setup as setup
 
@@ -107,34 +107,34 @@ def draw_prediction(summary: dict, *, n_samples: int = 2000, seed: int = 3, axes
     P = summary["P"]
     a1.plot(*pose[:2], "k^", ms=9, label="laser (mean pose)")
     if P[0, 0] > 0:
-        draw_ellipse(a1, pose[:2], P[:2, :2], 2.0, color="tab:blue", label="2σ position")
+        draw_ellipse(a1, pose[:2], P[:2, :2], 2.0, color=BLUE, label="2σ position")
     fan = 2.0 * math.sqrt(P[2, 2])
     reach = 1.1 * summary["range"]
     for d in (-fan, 0.0, fan):
         a1.plot([pose[0], pose[0] + reach * math.cos(pose[2] + d)],
                 [pose[1], pose[1] + reach * math.sin(pose[2] + d)],
-                "-" if d == 0 else ":", color="tab:blue", lw=1)
-    a1.plot(*lm, "r*", ms=14, label="landmark")
+                "-" if d == 0 else ":", color=BLUE, lw=1)
+    a1.plot(*lm, "*", color=RED, ms=14, label="landmark")
     if P[3, 3] > 0:
-        draw_ellipse(a1, lm, P[3:, 3:], 2.0, color="tab:red", label="2σ landmark")
+        draw_ellipse(a1, lm, P[3:, 3:], 2.0, color=RED, label="2σ landmark")
     a1.set(xlabel="x forward [m]", ylabel="y left [m]", aspect="equal",
            title="scene (dotted: heading ±2σ)")
     a1.grid(True, alpha=0.3)
-    a1.legend(fontsize=8, loc="best")
+    a1.legend(loc="best")
     deg = np.diag([180.0 / math.pi, 1.0])
     a2.plot(np.degrees(z_mc[::2, 1]), z_mc[::2, 0], ".", ms=2, color="0.7",
             label="Monte Carlo (true h)")
     zb = np.array([math.degrees(summary["bearing"]), summary["range"]])
     S_deg = deg @ summary["S"][::-1, ::-1] @ deg
-    draw_ellipse(a2, zb, S_deg, 2.0, color="tab:green", lw=2, label="2σ of S = HPHᵀ + R")
-    a2.plot(*zb, "g+", ms=12)
+    draw_ellipse(a2, zb, S_deg, 2.0, color=GREEN, lw=2, label="2σ of S = HPHᵀ + R")
+    a2.plot(*zb, "+", color=GREEN, ms=12)
     ratio = summary["mc_sd_ratio"]
     a2.set(xlabel="bearing [deg] (90 = straight ahead)", ylabel="range [m]",
            title=f"Monte-Carlo sd / linearised sd: range {ratio[0]:.2f}, bearing {ratio[1]:.2f}\n"
                  f"inside the 2σ ellipse: {100 * summary['mc_coverage']:.1f}% "
                  f"(a Gaussian: {100 * expected_coverage(2.0):.1f}%)")
     a2.grid(True, alpha=0.3)
-    a2.legend(fontsize=8, loc="best")
+    a2.legend(loc="best")
     if fig.get_layout_engine() is None:   # the course style lays out already
         fig.tight_layout()
     return fig
@@ -259,8 +259,8 @@ def printed_bearing_figure(landmarks, off, heading: float):
     where the printed bearing (an atan of a ratio) is off by pi."""
     landmarks, off = np.asarray(landmarks), np.asarray(off, dtype=bool)
     fig, (ax0, ax1) = figure(1, 2, height=4.8)
-    ax0.scatter(*landmarks[~off].T, s=12, color="tab:green", label="printed bearing right")
-    ax0.scatter(*landmarks[off].T, s=12, color="tab:red", marker="x",
+    ax0.scatter(*landmarks[~off].T, s=12, color=GREEN, label="printed bearing right")
+    ax0.scatter(*landmarks[off].T, s=12, color=RED, marker="x",
                 label="printed bearing off by π")
     ax0.plot(0, 0, "k^", ms=10)
     ax0.annotate("", xy=(6 * math.cos(heading), 6 * math.sin(heading)), xytext=(0, 0),
@@ -268,10 +268,11 @@ def printed_bearing_figure(landmarks, off, heading: float):
     ax0.axvline(0, color="k", lw=0.8, ls=":")
     ax0.set(xlabel="x [m]", ylabel="y [m]", aspect="equal",
             title="atan of a ratio: wrong for every landmark with x_i < x_L")
-    ax0.legend(loc="lower left", fontsize=8)
+    ax0.legend(loc="lower left")
     ang = np.degrees(np.arctan2(landmarks[:, 1], landmarks[:, 0]))
     ax1.hist([ang[~off], ang[off]], bins=36, range=(-180, 180), stacked=True,
-             color=["tab:green", "tab:red"], label=["right", "off by π"])
+             color=[GREEN, RED], hatch=["", "xx"], edgecolor="white", linewidth=0.3,
+             label=["right", "off by π"])
     ax1.set(xlabel="direction of the landmark from the laser [deg]", ylabel="landmarks",
             title="which directions the print gets wrong")
     ax1.legend(loc="upper right")
@@ -283,23 +284,23 @@ def edge_frame_figure(points, segment, beams, p_right, p_left, frame, origin_pri
     it (corrected), against the origin the printed transform implies."""
     fig, ax = figure(height=5.5)
     ax.plot(*np.asarray(points).T, ".", ms=3, color="0.6", label="the scan")
-    ax.plot(*np.asarray(segment).T, ".", ms=5, color="tab:blue", label=f"beams {beams[0]}..{beams[1]}")
-    ax.plot(*p_right, "o", color="tab:orange", ms=9, label="P_r (right end)")
-    ax.plot(*p_left, "s", color="tab:purple", ms=9, label="P_l (left end, origin)")
+    ax.plot(*np.asarray(segment).T, ".", ms=5, color=BLUE, label=f"beams {beams[0]}..{beams[1]}")
+    ax.plot(*p_right, "o", color=ORANGE, ms=9, label="P_r (right end)")
+    ax.plot(*p_left, "s", color=PURPLE, ms=9, label="P_l (left end, origin)")
     c, s = math.cos(frame[2]), math.sin(frame[2])
     p_left = np.asarray(p_left, dtype=float)
-    for vec, colour, name in (((c, s), "tab:red", "landmark x"), ((-s, c), "tab:green", "landmark y")):
+    for vec, colour, name in (((c, s), RED, "landmark x"), ((-s, c), GREEN, "landmark y")):
         ax.annotate("", xy=p_left + 2.0 * np.array(vec), xytext=p_left,
                     arrowprops=dict(arrowstyle="->", color=colour, lw=2))
         ax.text(*(p_left + 2.3 * np.array(vec)), name, color=colour, fontsize=9)
-    ax.plot(*origin_printed, "x", color="tab:red", ms=10, mew=2, label="origin implied by the print")
+    ax.plot(*origin_printed, "x", color=RED, ms=10, mew=2, label="origin implied by the print")
     ax.annotate("", xy=np.asarray(origin_printed) + 2.0 * np.array([c, s]), xytext=origin_printed,
-                arrowprops=dict(arrowstyle="->", color="tab:red", lw=1, ls="--"))
+                arrowprops=dict(arrowstyle="->", color=RED, lw=1, ls="--"))
     ax.plot(0, 0, "k^", ms=9, label="laser")
     ax.set(xlabel="x forward [m]", ylabel="y left [m]", aspect="equal", xlim=(-8, 10), ylim=(-4, 11),
            title="the landmark frame of a straight edge")
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.02, 0.5))
+    ax.legend(loc="center left", bbox_to_anchor=(1.02, 0.5))
     return fig
 
 
@@ -316,13 +317,13 @@ def linearisation_figure(cases: dict):
         ax.plot(np.degrees(samples[::16, 1]), samples[::16, 0], ".", ms=2, color="0.7",
                 label="Monte Carlo (true h)")
         draw_ellipse(ax, [math.degrees(centre[1]), centre[0]], to_deg @ S[::-1, ::-1] @ to_deg,
-                     2.0, color="tab:green", lw=2, label="2σ of H P Hᵀ")
+                     2.0, color=GREEN, lw=2, label="2σ of H P Hᵀ")
         draw_ellipse(ax, [math.degrees(m[1]), m[0]], to_deg @ C[::-1, ::-1] @ to_deg, 2.0,
-                     color="tab:red", ls="--", label="2σ of the Monte-Carlo covariance")
+                     color=RED, ls="--", label="2σ of the Monte-Carlo covariance")
         ax.set(xlabel="bearing [deg]", ylabel="range [m]", title=f"landmark at {rr:g} m")
         ax.grid(True, alpha=0.3)
         if k == 0:                # one legend: the panels share their three entries
-            ax.legend(fontsize=8, loc="upper right")
+            ax.legend(loc="upper right")
     return fig
 
 
@@ -338,9 +339,9 @@ def banana_figure(cases: dict):
     fig.suptitle("a new landmark at 20 m ahead, seen from an uncertain heading")
     for k, (ax, (sd_deg, (centre, S, m, C, samples))) in enumerate(zip(axes.flat, cases.items())):
         ax.plot(*samples[::16].T, ".", ms=2, color="0.7", label="Monte Carlo (true g)")
-        draw_ellipse(ax, centre, S, 2.0, color="tab:green", lw=2, label="2σ of G P Gᵀ")
-        ax.plot(*centre, "g+", ms=12, label="g(mean)")
-        ax.plot(*m, "rx", ms=10, label="Monte-Carlo mean")
+        draw_ellipse(ax, centre, S, 2.0, color=GREEN, lw=2, label="2σ of G P Gᵀ")
+        ax.plot(*centre, "+", color=GREEN, ms=12, label="g(mean)")
+        ax.plot(*m, "x", color=RED, ms=10, label="Monte-Carlo mean")
         ax.plot(0, 0, "k^", ms=9, label="laser")
         ax.set(xlabel="x forward [m]", ylabel="y left [m]", title=f"heading sd {sd_deg:g}°")
         ax.grid(True, alpha=0.3)
@@ -349,5 +350,5 @@ def banana_figure(cases: dict):
         else:
             ax.set(aspect="equal")
         if k == len(cases) - 1:   # one legend: the panels share their entries
-            ax.legend(fontsize=8, loc="center left")
+            ax.legend(loc="center left")
     return fig

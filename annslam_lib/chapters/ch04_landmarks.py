@@ -16,7 +16,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 from ipywidgets import IntSlider, SelectionSlider, interactive
 
-from ..perception.association import NEW, REJECTED, associate, gate_threshold, mahalanobis
+from ..perception.association import (NEW, NEW_LANDMARK_PROB, REJECTED, associate,
+                                      gate_threshold, mahalanobis)
 from ..perception.beacons import BeaconConfig, beacon_config_for, beacons_from_scan
 from ..perception.sources import gps_scan_poses
 from ..models.geometry import wrap_angle
@@ -25,12 +26,12 @@ from ..plots.style import figure, show_widget_figure, widget_figure
 from ..data.records import Dataset
 from ..models.uncertainty import ellipse_points
 from ..plots.style import notebook_setup as setup
+from ..plots.style import BLACK, BLUE, GREEN, GREY, ORANGE, PURPLE, RED, SKY
 
 #: Colours of the association outcomes in :func:`draw_gates`.
-OUTCOME_STYLE = {NEW: ("tab:green", "new landmark"), REJECTED: ("tab:red", "rejected")}
+OUTCOME_STYLE = {NEW: (GREEN, "new landmark"), REJECTED: (RED, "rejected")}
 #: Colours of the gates (none of them green or red, the outcome colours).
-GATE_COLORS = ("tab:blue", "tab:orange", "tab:purple", "tab:brown", "tab:cyan", "tab:olive",
-               "tab:pink", "tab:gray")
+GATE_COLORS = (BLUE, ORANGE, PURPLE, RED, SKY, GREEN, BLACK, GREY)
 
 __all__ = ["setup", "beacon_scans_figure", "tape_levels_figure", "residuals_figure", "extracted_map_figure",
            "tree_detections_figure", "gates_figure", "gate_sweep_figure", "beacon_scan_summary", "draw_beacon_scan", "beacon_scrubber", "draw_gates",
@@ -95,7 +96,7 @@ def draw_beacon_scan(ds: Dataset, summary: dict, ax=None, *, max_range: float = 
     p = _laser_xy(r, b)
     ax.plot(*p[keep & (lv == 0)].T, ".", ms=3, color="0.6", label="return")
     bright = keep & (lv > 0)
-    ax.scatter(*p[bright].T, s=10 + 10 * lv[bright], color="tab:red", zorder=3, label="tape beams")
+    ax.scatter(*p[bright].T, s=10 + 10 * lv[bright], color=RED, zorder=3, label="tape beams")
     z = summary["z"]
     if z.shape[0]:
         c = _laser_xy(z[:, 0], z[:, 1])
@@ -107,7 +108,7 @@ def draw_beacon_scan(ds: Dataset, summary: dict, ax=None, *, max_range: float = 
     ref = summary.get("reference")
     if ref is not None and ref["z"].shape[0]:
         q = _laser_xy(ref["z"][:, 0], ref["z"][:, 1])
-        ax.scatter(*q.T, s=160, facecolors="none", edgecolors="tab:blue", lw=1.5, zorder=4,
+        ax.scatter(*q.T, s=160, facecolors="none", edgecolors=BLUE, lw=1.5, zorder=4,
                    label="surveyed (GPS pose)")
     ax.plot(0, 0, "k^", ms=8, label="laser")
     ax.set(xlabel="x forward [m]", ylabel="y left [m]", aspect="equal",
@@ -115,7 +116,7 @@ def draw_beacon_scan(ds: Dataset, summary: dict, ax=None, *, max_range: float = 
            title=f"scan {k} at t = {summary['t']:.2f} s: {summary['bright_beams']} tape beams, "
                  f"{summary['beacons']} beacons")
     ax.grid(True, alpha=0.3)
-    ax.legend(loc="upper left", fontsize=8)
+    ax.legend(loc="upper left")
     return ax
 
 
@@ -192,7 +193,7 @@ def draw_gates(ax, zhat, S, z=None, assign=None, *, gate: float | None = None,
                 ax.plot([p[0], math.degrees(m[1])], [p[1], m[0]], "k--", lw=1.2, zorder=4)
     handles = [plt.Line2D([], [], marker="o", ls="", color=c, mec="k", label=lab)
                for c, lab in [("k", "matched"), *OUTCOME_STYLE.values()]]
-    ax.legend(handles=handles, fontsize=8, loc="best")
+    ax.legend(handles=handles, loc="best")
     ax.set(xlabel="bearing [deg]", ylabel="range [m]", title=title)
     ax.grid(True, alpha=0.3)
     return ax
@@ -212,7 +213,7 @@ def crafted_scene() -> dict:
     return {"zhat": zhat, "S": S, "z": z}
 
 
-def gate_explorer(*, prob: float = 0.99, new_prob: float = 0.9999):
+def gate_explorer(*, prob: float = 0.99, new_prob: float = NEW_LANDMARK_PROB):
     """A slider over the gate probability on :func:`crafted_scene`: watch observations
     move between matched, rejected and new. ``widget.holder['summary']`` holds d2,
     the gate and the assignment."""
@@ -273,7 +274,7 @@ def residuals_figure(res, stats: dict, config: BeaconConfig):
     GPS, with the normal densities of the chosen sigma_r and sigma_beta."""
     fig, (a1, a2) = figure(1, 2, height=3.8)
     m = res.matched
-    a1.hist(100 * res.range[m], bins=np.arange(-15, 16, 1), density=True, color="tab:blue", alpha=0.7)
+    a1.hist(100 * res.range[m], bins=np.arange(-15, 16, 1), density=True, color=BLUE, alpha=0.7)
     x = np.linspace(-15, 15, 200)
     sr = 100 * config.sigma_range
     a1.plot(x, _normal(x, sr), "k-", label=f"N(0, {sr:.0f} cm): the chosen σ_r")
@@ -281,7 +282,7 @@ def residuals_figure(res, stats: dict, config: BeaconConfig):
            title=f"range: mean {100 * stats['range_mean']:+.1f} cm, sd {100 * stats['range_std']:.1f} cm")
     a1.legend(loc="upper left")
     a2.hist(np.degrees(res.bearing[m]), bins=np.arange(-4, 4.25, 0.25), density=True,
-            color="tab:orange", alpha=0.7)
+            color=ORANGE, alpha=0.7)
     x = np.linspace(-4, 4, 200)
     sb = math.degrees(config.sigma_bearing)
     a2.plot(x, _normal(x, sb), "k-", label=f"N(0, {sb:.0f}°): the chosen σ_β")
@@ -305,7 +306,7 @@ def extracted_map_figure(ds: Dataset, world, ok, intensity):
     for ax, zoom in zip(axs, (False, True)):
         ax.plot(ds.gps.east, ds.gps.north, "-", color="0.7", lw=1, label="GPS track")
         for n_, b_ in enumerate(ds.beacons):
-            ax.add_patch(plt.Circle(b_, 1.0, fill=False, color="tab:red",
+            ax.add_patch(plt.Circle(b_, 1.0, fill=False, color=RED,
                                     label="1 m around a surveyed beacon" if n_ == 0 else None))
         sc = ax.scatter(*world[ok].T, s=5 if not zoom else 12, c=np.asarray(intensity)[ok],
                         cmap="viridis", label="extracted beacons (colour: level)")
@@ -318,7 +319,7 @@ def extracted_map_figure(ds: Dataset, world, ok, intensity):
             fig.colorbar(sc, ax=ax, label="intensity level")
         else:
             ax.set(xlim=(-10, 20), ylim=(-25, 20), title=f"{ok.sum()} beacons placed from the GPS pose")
-            ax.legend(fontsize=8, loc="lower left")
+            ax.legend(loc="lower left")
     return fig
 
 
@@ -326,11 +327,11 @@ def tree_detections_figure(trees):
     """Victoria Park's tree detections: ranges, bearings, and diameter against range with
     the chord of one beam."""
     fig, axs = figure(1, 3, height=3.6)
-    axs[0].hist(trees.range, bins=np.arange(0, 80, 2), color="tab:green")
+    axs[0].hist(trees.range, bins=np.arange(0, 80, 2), color=GREEN)
     axs[0].set(xlabel="range [m]", ylabel="detections")
-    axs[1].hist(np.degrees(trees.bearing), bins=np.arange(0, 181, 5), color="tab:green")
+    axs[1].hist(np.degrees(trees.bearing), bins=np.arange(0, 181, 5), color=GREEN)
     axs[1].set(xlabel="bearing [deg] (90 = ahead)")
-    axs[2].scatter(trees.range[::5], trees.diameter[::5], s=1, alpha=0.3, color="tab:green",
+    axs[2].scatter(trees.range[::5], trees.diameter[::5], s=1, alpha=0.3, color=GREEN,
                    label="trees (every 5th)")
     rr = np.linspace(0, 80, 50)
     axs[2].plot(rr, rr * math.radians(0.5), "k-", label="one beam chord, r × 0.5°")
@@ -355,8 +356,9 @@ def gate_sweep_figure(probs, table):
     """Correct, missed and wrong associations against the gate probability (log scale)."""
     fig, ax = figure(height=4.0)
     x = np.arange(len(probs))
-    for key, color in (("correct", "tab:green"), ("missed", "tab:orange"), ("wrong", "tab:red")):
-        ax.plot(x, [row[key] for row in table], "o-", color=color, label=key)
+    for key, color, style in (("correct", GREEN, "o-"), ("missed", ORANGE, "s--"),
+                              ("wrong", RED, "^:")):
+        ax.plot(x, [row[key] for row in table], style, color=color, label=key)
     ax.set_yscale("log")
     ax.set_xticks(x, [f"{p:.8g}" for p in probs])
     ax.set(xlabel="gate probability p", ylabel="measurements", title="too small: missed; too large: wrong")

@@ -3,6 +3,8 @@ figures and the map-error explorer.
 
 Each experiment is a function returning numbers (tested without a notebook); the filter
 is :func:`annslam_lib.slam.localisation.localise` (the course's run with the map known).
+The student's own filter (exercise 4a.2) runs in chapter 09's harness with the map given
+(:func:`steps`); :func:`reference_localise` is the same loop from the course's pieces.
 """
 from __future__ import annotations
 
@@ -17,17 +19,24 @@ from .._cache import memoize
 from ..data.records import Dataset, truncate
 from ..evaluation.summary import run_metrics
 from ..evaluation.trajectory import trajectory_errors
-from ..plots.style import figure, show_widget_figure, widget_figure
+from ..plots.style import BLUE, GREEN, ORANGE, RED, figure, show_widget_figure, widget_figure
 from ..plots.style import notebook_setup as setup
 from ..slam import localisation
 from ..slam.config import SlamConfig
 from ..slam.dead_reckoning import dead_reckon
 from ..slam.results import STATUS
 from ..slam.runner import run
+from ..models.observation import observe
+from ..perception.association import REJECTED, associate, mahalanobis
+from .harness import Predict, Scan, Start, Track, dataset_of, midpoint_step, score_run
+from .harness import steps as _steps
 
 __all__ = ["setup", "compare", "COMPARED", "paths_figure", "SHIFTS",
            "moved_beacon_sweep", "moved_beacon_figure", "missing_beacon", "state_at",
-           "wrong_association", "map_error_summary", "map_error_explorer", "EXPLORER_FIGSIZE"]
+           "wrong_association", "map_error_summary", "map_error_explorer", "EXPLORER_FIGSIZE",
+           "Start", "Predict", "Scan", "Track", "steps", "dataset_of", "score_run",
+           "midpoint_step", "reference_loc_predict", "reference_gate", "reference_update",
+           "reference_localise"]
 
 #: The runs :func:`compare` makes: (label, map mode, GPS mode).
 COMPARED = (("SLAM, GPS for 10 s", "slam", "init"), ("SLAM, no GPS", "slam", "none"),
@@ -92,19 +101,19 @@ def paths_figure(car: Dataset, rows: list[dict]):
     fig, (ax, ax1) = figure(1, 2, height=5.2, width_ratios=[1, 1.6])
     ax.plot(*car.gps.xy.T, ".", color="0.6", ms=2, label="GPS")
     by = {r["label"]: r for r in rows}
-    for label, color in [("SLAM, no GPS", "tab:orange"), ("localisation, no GPS", "tab:blue")]:
+    for label, color in [("SLAM, no GPS", ORANGE), ("localisation, no GPS", BLUE)]:
         tr = by[label]["result"].odometry_trajectory
         ax.plot(tr[:, 1], tr[:, 2], color=color, lw=1.2, label=label)
     ax.plot(*car.beacons.T, "k^", ms=7, label="surveyed beacons")
     ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal", title="the map known or built")
-    ax.legend(fontsize=7, loc="lower right")
+    ax.legend(loc="lower right")
     ax.grid(True, alpha=0.3)
     for r in rows[1:]:
         e = r["errors"]
         ax1.plot(e.t, e.error, lw=1, label=r["label"])
     ax1.set(xlabel="time [s]", ylabel="error against GPS [m]", yscale="log",
             title="position error along the run")
-    ax1.legend(fontsize=7, ncol=2, loc="lower right")
+    ax1.legend(ncol=2, loc="lower right")
     ax1.grid(True, alpha=0.3, which="both")
     return fig
 
@@ -155,11 +164,11 @@ def moved_beacon_figure(sweep: dict):
     ax0.plot(s, [r["traj_rmse"] for r in sweep["rows"]], "o-")
     ax0.set(xlabel="shift of the beacon in the map [m]", ylabel="trajectory RMSE [m]",
             title=f"beacon {sweep['beacon']} moved: the path")
-    ax1.plot(s, [r["accepted"] for r in sweep["rows"]], "o-", color="tab:green", label="accepted")
-    ax1.plot(s, [r["rejected"] for r in sweep["rows"]], "s-", color="tab:red", label="rejected")
+    ax1.plot(s, [r["accepted"] for r in sweep["rows"]], "o-", color=GREEN, label="accepted")
+    ax1.plot(s, [r["rejected"] for r in sweep["rows"]], "s-", color=RED, label="rejected")
     ax1.set(xlabel="shift of the beacon in the map [m]", ylabel="sightings",
             title=f"its {sweep['sightings']} sightings: what the gate did")
-    ax1.legend(fontsize=8)
+    ax1.legend()
     for ax in (ax0, ax1):
         ax.grid(True, alpha=0.3)
     return fig
@@ -242,11 +251,11 @@ def map_error_explorer(car: Dataset, *, beacon: int = 12, shift: float = 0.0):
         s = map_error_summary(car, beacon, shift, cache=cache)
         fig, ax = widget_figure(figsize=EXPLORER_FIGSIZE)
         ax.plot(ref.t, ref.error, color="0.6", lw=1, label="the right map")
-        ax.plot(s["errors"].t, s["errors"].error, color="tab:red", lw=1,
+        ax.plot(s["errors"].t, s["errors"].error, color=RED, lw=1,
                 label=f"beacon {s['beacon']} moved {s['shift']:.1f} m")
         ax.set(xlabel="time [s]", ylabel="error against GPS [m]",
                title="localisation without GPS on a wrong map")
-        ax.legend(fontsize=8, loc="upper left")
+        ax.legend(loc="upper left")
         ax.grid(True, alpha=0.3)
         holder["summary"] = s
         print(f"beacon {s['beacon']} moved {s['shift']:.1f} m: RMSE {s['traj_rmse']:.3f} m; of its "
@@ -261,3 +270,60 @@ def map_error_explorer(car: Dataset, *, beacon: int = 12, shift: float = 0.0):
         beacon=Dropdown(options=list(range(len(car.beacons))), value=beacon, description="beacon"))
     widget.holder = holder
     return widget
+
+
+# ------------------------------------------------------------------ exercise 4a.2's loop
+
+def steps(run: str):
+    """The run named ``run`` as steps (chapter 09's harness), the map given: the
+    :class:`Start` holds ``beacons``, the true positions on the simulator and the surveyed
+    ones on the Car Park."""
+    return _steps(run, known_map=True)
+
+
+def reference_loc_predict(pose, P, control, dt, Q, vehicle):
+    """The prediction of the pose alone (eq. 4a.1's filter, chapter 01's model with chapter
+    05's midpoint step): pose -> f(pose, u), P -> F P F^T + G Q G^T."""
+    new, F, G = midpoint_step(pose, control, dt, vehicle)
+    P = F @ np.asarray(P, float) @ F.T + G @ np.asarray(Q, float) @ G.T
+    return new, 0.5 * (P + P.T)
+
+
+def reference_gate(pose, P, z, beacons, R, gate):
+    """Per detection of ``z`` (k, 2): the index of its beacon, or -2 rejected. Each beacon's
+    predicted sighting and S = H P H^T + R (H by the pose, the map known), d^2 against
+    ``gate``, then chapter 04's nearest neighbour with mutual exclusion."""
+    z = np.asarray(z, float).reshape(-1, 2)
+    if z.shape[0] == 0:
+        return np.zeros(0, dtype=int)
+    zhat, Hp, _ = observe(np.asarray(pose, float), np.asarray(beacons, float))
+    S = np.einsum("nij,jk,nlk->nil", Hp, np.asarray(P, float), Hp) + np.asarray(R, float)
+    a = associate(mahalanobis(z, zhat, S), gate, gate)
+    a[a < 0] = REJECTED
+    return a
+
+
+def reference_update(pose, P, z, beacon, R):
+    """One sighting's update (eq. 4a.1-4a.3, exercise 4a.1)."""
+    new, P_new, _ = localisation.beacon_update(pose, P, z, beacon, R)
+    return new, P_new
+
+
+def reference_localise(run: str, predict=reference_loc_predict, gate=reference_gate,
+                       update=reference_update) -> dict:
+    """The localisation loop from its pieces: predict at every :class:`Predict`; at every
+    :class:`Scan` gate all detections against the prior, then update with each gated one
+    in turn; record. Returns :meth:`Track.result`."""
+    track = Track()
+    it = steps(run)
+    start = next(it)
+    pose, P = start.x0.copy(), start.P0.copy()
+    for step in it:
+        if isinstance(step, Predict):
+            pose, P = predict(pose, P, step.control, step.dt, step.Q, start.vehicle)
+            continue
+        a = np.asarray(gate(pose, P, step.z, start.beacons, start.R, start.gate))
+        for i in np.flatnonzero(a >= 0):
+            pose, P = update(pose, P, step.z[i], start.beacons[a[i]], start.R)
+        track.record(step.t, pose, P)
+    return track.result()

@@ -28,7 +28,7 @@ from ..evaluation.trajectory import trajectory_errors
 from ..plots.slam import (CAR_PARK_LIMITS, plot_consistency, plot_correlation,
                           plot_landmark_zooms, plot_true_vs_mapped, true_path)
 from ..plots.blit import Blit, drawn_by
-from ..plots.style import DPI, FIG_WIDTH, figure
+from ..plots.style import BLUE, DPI, FIG_WIDTH, GREEN, ORANGE, PURPLE, RED, figure
 from ..plots.style import notebook_setup as setup
 from ..slam.config import SlamConfig
 from ..slam.dead_reckoning import initial_pose_from_gps
@@ -126,8 +126,8 @@ def _draw_data(axes3, summary: dict, ellipse_scale: float, limits, *, legend: bo
         ax.plot(x, y, "o", color="k", ms=7, zorder=7)
         e, (t, sd) = _curves(summary)
         if e is not None:
-            ax_e.plot(*e, lw=1.0, color="tab:blue")
-        ax_p.plot(t, sd, lw=1.0, color="tab:purple")
+            ax_e.plot(*e, lw=1.0, color=BLUE)
+        ax_p.plot(t, sd, lw=1.0, color=PURPLE)
 
     _, drawn = drawn_by(axes3, draw)
     return [c for c in drawn if c is not ax.get_legend()] + [ax.title]   # the legend stays
@@ -274,7 +274,7 @@ def slam_explorer(dataset: Dataset, config: SlamConfig | None = None, *,
 
 def _turning_shade(ax, t, turning) -> None:
     ax.fill_between(t, 0, 1, where=turning, transform=ax.get_xaxis_transform(),
-                    color="tab:orange", alpha=0.12, step="mid", label="turning")
+                    color=ORANGE, alpha=0.12, step="mid", label="turning")
 
 
 def consistency_figure(t_scan, turning, nees, nis, *, title: str = "average pose NEES"):
@@ -294,12 +294,12 @@ def nees_comparison_figure(t_scan, turning, nees_a, nees_b, labels=("Euler", "mi
     """Two average-NEES curves on one band (the first's), the turns shaded."""
     fig, ax = figure(height=3.8)
     _turning_shade(ax, t_scan, turning)
-    plot_consistency(nees_a, ax=ax, expected=3.0, color="tab:red",
+    plot_consistency(nees_a, ax=ax, expected=3.0, color=RED,
                      label=f"{labels[0]}: mean {nees_a.mean:.2f}, {100 * nees_a.inside:.0f} % inside")
-    ax.plot(nees_b.t, nees_b.value, "-", lw=0.9, color="tab:green",
+    ax.plot(nees_b.t, nees_b.value, "-", lw=0.9, color=GREEN,
             label=f"{labels[1]}: mean {nees_b.mean:.2f}, {100 * nees_b.inside:.0f} % inside")
     ax.set(ylim=(0, 8), title=f"average pose NEES: {labels[0]} against {labels[1]}")
-    ax.legend(fontsize=8, loc="upper right", ncol=2)
+    ax.legend(loc="upper right", ncol=2)
     return fig
 
 
@@ -317,7 +317,7 @@ def figure5(result, dataset, *, ellipse_scale: float = 10.0, max_distance: float
     err = np.hypot(*(result.landmarks[i] - dataset.beacons[j]).T)
     sig = np.sqrt(np.linalg.eigvalsh(result.landmark_cov[i])[:, 1])
     x = np.arange(j.size)
-    ax1.bar(x, 100 * err, color="tab:blue", label="mapped − surveyed")
+    ax1.bar(x, 100 * err, color=BLUE, label="mapped − surveyed")
     ax1.plot(x, 200 * sig, "k_", ms=14, mew=2, label="2σ of the landmark (largest axis)")
     ax1.set_xticks(x, [str(v) for v in j])
     ax1.set(xlabel="surveyed beacon", ylabel="distance [cm]",

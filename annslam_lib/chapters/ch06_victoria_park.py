@@ -23,7 +23,7 @@ from ..evaluation.trajectory import TrajectoryErrors, trajectory_errors
 from ..evaluation.residuals import ROUNDING, bound_text
 from ..models.uncertainty import ellipse_curves
 from ..plots.blit import Blit, drawn_by
-from ..plots.style import FIG_WIDTH, figure, show_png, widget_figure
+from ..plots.style import BLUE, FIG_WIDTH, GREEN, ORANGE, RED, figure, show_png, widget_figure
 from ..plots.style import notebook_setup as setup
 from ..slam.results import SlamResult
 
@@ -110,23 +110,23 @@ def draw_run(result: SlamResult, gps: Gps, t: float | None = None, ax=None, *,
     upto = int(np.searchsorted(traj[:, 0], t, side="right"))
     g = gps.t <= t
     ok = g if outliers is None else g & ~outliers
-    ax.plot(gps.east[ok], gps.north[ok], ".", ms=2, color="tab:blue", label="GPS fixes")
+    ax.plot(gps.east[ok], gps.north[ok], ".", ms=2, color=BLUE, label="GPS fixes")
     if outliers is not None and np.any(g & outliers):
-        ax.plot(gps.east[g & outliers], gps.north[g & outliers], "x", ms=9, mew=2, color="tab:red",
+        ax.plot(gps.east[g & outliers], gps.north[g & outliers], "x", ms=9, mew=2, color=RED,
                 label="GPS outlier")
     ax.plot(traj[:upto, 1], traj[:upto, 2], "-", lw=0.7, color="k", label="EKF-SLAM track")
     seen = first_seen <= t
     if np.any(seen):
         curves = ellipse_curves(result.landmarks[seen], result.landmark_cov[seen], n_sigma)
-        ax.add_collection(LineCollection(curves, colors="tab:green", linewidths=0.7))
+        ax.add_collection(LineCollection(curves, colors=GREEN, linewidths=0.7))
         ax.plot(result.landmarks[seen, 0], result.landmarks[seen, 1], "+", ms=4,
-                color="tab:green", label=f"landmarks ({seen.sum()}), {n_sigma:g}-sigma")
+                color=GREEN, label=f"landmarks ({seen.sum()}), {n_sigma:g}-sigma")
     if upto:
         x, y, phi = traj[upto - 1, 1:4]
-        ax.plot(x, y, marker=(3, 0, np.degrees(phi) - 90), ms=12, color="tab:orange",
+        ax.plot(x, y, marker=(3, 0, np.degrees(phi) - 90), ms=12, color=ORANGE,
                 mec="k", ls="", label="pose", zorder=6)
         e = ellipse_curves([x, y], result.pose_cov[upto - 1][:2, :2], n_sigma)[0]
-        ax.plot(e[:, 0], e[:, 1], "-", color="tab:orange", lw=1.2)
+        ax.plot(e[:, 0], e[:, 1], "-", color=ORANGE, lw=1.2)
     # Frame the whole run (track, map, GPS without its outliers), whatever t is, so that
     # the view does not jump while the slider moves; a far outlier stays off the figure.
     pts = [traj[:, 1:3], result.landmarks, gps.xy if outliers is None else gps.xy[~outliers]]
@@ -135,7 +135,7 @@ def draw_run(result: SlamResult, gps: Gps, t: float | None = None, ax=None, *,
     ax.set(xlabel="East x [m]", ylabel="North y [m]", aspect="equal", xlim=(lo[0], hi[0]),
            ylim=(lo[1], hi[1]))
     ax.grid(True, alpha=0.3)
-    ax.legend(loc="upper center", fontsize=8)
+    ax.legend(loc="upper center")
     return ax
 
 
@@ -151,15 +151,15 @@ def draw_gps_errors(errors: TrajectoryErrors, ax=None, *, t: float | None = None
     bad = np.zeros(errors.t.size, bool) if outliers is None else np.asarray(outliers, bool)
     if bad.shape != errors.t.shape:
         raise ValueError(f"outliers must flag each of the {errors.t.size} errors, got {bad.shape}")
-    ax.plot(errors.t[~bad], errors.error[~bad], ".", ms=2, color="tab:blue", label="error at a fix")
+    ax.plot(errors.t[~bad], errors.error[~bad], ".", ms=2, color=BLUE, label="error at a fix")
     if bad.any():
         ax.plot(errors.t[bad], np.minimum(errors.error[bad], ylim[1] * 0.97), "x", ms=9, mew=2,
-                color="tab:red", label="GPS outlier (clipped)")
+                color=RED, label="GPS outlier (clipped)")
     if t is not None:
-        ax.axvline(t, color="tab:orange", lw=1.5)
+        ax.axvline(t, color=ORANGE, lw=1.5)
     ax.set(xlabel="t [s]", ylabel="|track - GPS| [m]", ylim=ylim)
     ax.grid(True, alpha=0.3)
-    ax.legend(loc="upper left", fontsize=8)
+    ax.legend(loc="upper left")
     return ax
 
 
@@ -245,8 +245,8 @@ def gps_errors_figure(errors: TrajectoryErrors, outliers, first_seen):
     fig, ax = figure(height=3.8)
     draw_gps_errors(errors, ax, outliers=outliers)
     ax2 = ax.twinx()
-    ax2.plot(np.sort(first_seen), np.arange(1, len(first_seen) + 1), color="tab:green", lw=1.5)
-    ax2.set_ylabel("landmarks mapped so far", color="tab:green")
+    ax2.plot(np.sort(first_seen), np.arange(1, len(first_seen) + 1), color=GREEN, lw=1.5)
+    ax2.set_ylabel("landmarks mapped so far", color=GREEN)
     ax.set_title("error of the track at every GPS fix (dots; gaps stay gaps), and the growing map")
     return fig
 
@@ -258,13 +258,13 @@ def slam_vs_dead_reckoning_figure(gps: Gps, outliers, dead_reckoned, result: Sla
     GPS fixes on a log scale (right); GPS outliers left out."""
     fig, (a1, a2) = figure(1, 2, height=5.5, width_ratios=[1, 1.3])
     ok = ~np.asarray(outliers, bool)
-    a1.plot(gps.east[ok], gps.north[ok], ".", ms=2, color="tab:blue", label="GPS")
-    a1.plot(dead_reckoned[:, 1], dead_reckoned[:, 2], "-", lw=0.8, color="tab:red", label="dead reckoning")
+    a1.plot(gps.east[ok], gps.north[ok], ".", ms=2, color=BLUE, label="GPS")
+    a1.plot(dead_reckoned[:, 1], dead_reckoned[:, 2], "-", lw=0.8, color=RED, label="dead reckoning")
     a1.plot(result.trajectory[:, 1], result.trajectory[:, 2], "-", lw=0.7, color="k", label="EKF-SLAM")
     a1.set(xlabel="East x [m]", ylabel="North y [m]", aspect="equal", title="the tracks")
     a1.legend(loc="lower left")
     a1.grid(True, alpha=0.3)
-    a2.semilogy(dr_errors.t[dr_keep], dr_errors.error[dr_keep], ".", ms=2, color="tab:red",
+    a2.semilogy(dr_errors.t[dr_keep], dr_errors.error[dr_keep], ".", ms=2, color=RED,
                 label="dead reckoning")
     a2.semilogy(errors.t[~err_outliers], errors.error[~err_outliers], ".", ms=2, color="k",
                 label="EKF-SLAM")
@@ -294,7 +294,7 @@ def health_figure(health: dict, steps):
     a2.set(xlabel="steps", ylabel="smallest eigenvalue of (P + P^T)/2", title="positive definiteness")
     for a in (a1, a2):
         a.grid(True, alpha=0.3)
-        a.legend(fontsize=8)
+        a.legend()
     return fig
 
 
@@ -306,12 +306,12 @@ def cost_figure(costs, n_map: int):
     fig, ax = figure(height=4.5)
     ax.loglog(N_all, [row.efficient.predict for row in costs], "o-", label="efficient: predict")
     ax.loglog(N_all, [row.efficient.update for row in costs], "s-", label="efficient: update")
-    ax.loglog([row.N for row in dense], [row.dense.step for row in dense], "^-", color="tab:red",
+    ax.loglog([row.N for row in dense], [row.dense.step for row in dense], "^-", color=RED,
               label="dense: step")
     for p, ls in ((1, ":"), (2, "--"), (3, "-.")):
         ax.loglog(N_all, 2e-4 * (N_all / 300.0) ** p, ls, color="0.5", lw=1, label=f"slope {p}")
-    ax.axvline(n_map, color="tab:green", lw=1)
-    ax.annotate("Victoria Park map", (n_map, 2e-5), rotation=90, color="tab:green", fontsize=8)
+    ax.axvline(n_map, color=GREEN, lw=1)
+    ax.annotate("Victoria Park map", (n_map, 2e-5), rotation=90, color=GREEN, fontsize=8)
     ax.set(xlabel="landmarks N", ylabel="seconds", title="cost of one step as the map grows")
     ax.grid(True, alpha=0.3, which="both")
     ax.legend(loc="upper left", ncol=2)

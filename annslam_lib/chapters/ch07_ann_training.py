@@ -19,7 +19,7 @@ from ..ann.evaluation import HiddenSizeGrid, grid_summary
 from ..plots.ann import (performance_limits, performance_moving, plot_landmark_errors,
                          plot_performance, set_performance)
 from ..plots.blit import Blit
-from ..plots.style import figure, show_png, widget_figure
+from ..plots.style import PURPLE, RED, figure, show_png, widget_figure
 from ..plots.style import notebook_setup as setup
 
 __all__ = ["setup", "plot_hidden_grid", "loop_mistakes_figure", "landmark_errors_figure",
@@ -34,8 +34,8 @@ def plot_hidden_grid(grid: HiddenSizeGrid, ax=None, *, hidden: int | None = None
     if ax is None:
         _, ax = plt.subplots(figsize=(6, 4.2))
     h = np.asarray(grid.hidden, dtype=float)
-    for name, vals, base, color in (("chronological test", grid.chrono, grid.chrono_base, "tab:red"),
-                                    ("leave-beacons-out", grid.lbo, grid.lbo_base, "tab:purple")):
+    for name, vals, base, color in (("chronological test", grid.chrono, grid.chrono_base, RED),
+                                    ("leave-beacons-out", grid.lbo, grid.lbo_base, PURPLE)):
         if np.all(np.isnan(vals)):
             continue
         mu, sd = vals.mean(axis=1), vals.std(axis=1)
@@ -52,7 +52,7 @@ def plot_hidden_grid(grid: HiddenSizeGrid, ax=None, *, hidden: int | None = None
     ax.minorticks_off()
     ax.set(xlabel="hidden neurons", ylabel="held-out RMSE (m)",
            title=f"{len(grid.seeds)} seeds per size")
-    ax.legend(fontsize=7)
+    ax.legend()
     ax.grid(alpha=0.3)
     return ax.figure
 

@@ -26,7 +26,7 @@ from ..plots.blit import Blit
 from ..plots.paper import (plot_pose_trace, plot_r_scale, plot_transfer, r_scale_moving,
                            r_scale_trace_limits, set_r_scale)
 from ..plots.slam import CAR_PARK_LIMITS, plot_true_vs_mapped
-from ..plots.style import DPI, FIG_WIDTH, figure
+from ..plots.style import BLUE, DPI, FIG_WIDTH, RED, figure
 from ..plots.style import notebook_setup as setup
 from ..slam.config import SlamConfig
 
@@ -81,10 +81,10 @@ def figure5_figure(st: Study, dataset: Dataset, seed_index: int = 0,
     fig, axes = figure(1, 2, height=7.0, width_ratios=(1, 1.1))
     ann_run = st.results["ann"][seed_index]
     plot_true_vs_mapped(ann_run, dataset, ax=axes[0], ellipse_scale=10.0, limits=CAR_PARK_LIMITS,
-                        color="tab:red", label="ANN", title="Figure 5 with the ANN (ellipses x10)")
-    plot_true_vs_mapped(ann_run, dataset, ax=axes[1], color="tab:red", label="ANN",
+                        color=RED, label="ANN", title="Figure 5 with the ANN (ellipses x10)")
+    plot_true_vs_mapped(ann_run, dataset, ax=axes[1], color=RED, label="ANN",
                         title="zoom: ANN and beacons-only, ellipses at true size")
-    plot_true_vs_mapped(st.results["beacons"], ax=axes[1], color="tab:blue", label="beacons-only",
+    plot_true_vs_mapped(st.results["beacons"], ax=axes[1], color=BLUE, label="beacons-only",
                         show_truth=False)
     axes[1].set(xlim=zoom[0], ylim=zoom[1])
     return fig

@@ -21,7 +21,7 @@ from ..evaluation.map import map_errors
 from ..evaluation.trajectory import trajectory_errors
 from ..models.observation import inverse_observe
 from ..perception import association, jcbb
-from ..plots.style import figure, show_widget_figure, widget_figure
+from ..plots.style import GREEN, RED, figure, show_widget_figure, widget_figure
 from ..plots.style import notebook_setup as setup
 from ..slam.config import SlamConfig
 from ..slam.runner import run
@@ -65,12 +65,12 @@ def heading_information(seed: int = 7, laps: int = 2) -> dict:
 
 def heading_figure(info: dict):
     fig, ax = figure(height=3.4)
-    ax.plot(info["t"], info["ekf"], color="tab:red", label="standard EKF")
+    ax.plot(info["t"], info["ekf"], color=RED, label="standard EKF")
     ax.plot(info["t"], info["fej"], color="k", label="first-estimates Jacobians (FEJ)")
     ax.axhline(1.0, color="0.5", ls="--", lw=1, label="the prior: the bound")
     ax.set(xlabel="time [s]", ylabel="heading variance / prior", yscale="log",
            title="what the filter claims to know about the global heading (no GPS)")
-    ax.legend(fontsize=8)
+    ax.legend()
     ax.grid(True, alpha=0.3)
     return fig
 
@@ -213,13 +213,13 @@ def victoria_park_comparison(every: int = 25) -> dict:
 def cost_figure(vp: dict):
     fig, ax = figure(height=3.4)
     step = np.asarray(vp["step_cpu"]) * 1e3
-    ax.plot(vp["step_landmarks"], step, ".", ms=2, color="tab:green", alpha=0.5,
+    ax.plot(vp["step_landmarks"], step, ".", ms=2, color=GREEN, alpha=0.5,
             label=f"iSAM2, one update (every {vp['every']} poses: scans, GPS fixes)")
-    ax.axhline(vp["ekf_cpu_per_scan"] * 1e3 * vp["every"], color="tab:red",
+    ax.axhline(vp["ekf_cpu_per_scan"] * 1e3 * vp["every"], color=RED,
                label=f"EKF, {vp['every']} scans (mean over the run)")
     ax.set(xlabel="landmarks in the map", ylabel="CPU per update [ms]", yscale="log",
            title="Victoria Park: cost per update as the map grows")
-    ax.legend(fontsize=8)
+    ax.legend()
     ax.grid(True, alpha=0.3)
     return fig
 
@@ -298,11 +298,11 @@ def loop_closure_explorer(car: Dataset, problem: gp.GraphProblem, *, drop: float
         s = cache[keep]
         fig, ax = widget_figure(figsize=EXPLORER_FIGSIZE)
         ax.plot(ref.t, ref.error, color="0.6", lw=1, label="every loop closure")
-        ax.plot(s["errors"].t, s["errors"].error, color="tab:red", lw=1,
+        ax.plot(s["errors"].t, s["errors"].error, color=RED, lw=1,
                 label=f"{s['dropped']} of {s['closures']} closures dropped")
         ax.set(xlabel="time [s]", ylabel="error against GPS [m]",
                title="batch smoothing of the Car Park without GPS after 10 s")
-        ax.legend(fontsize=8, loc="upper left")
+        ax.legend(loc="upper left")
         ax.grid(True, alpha=0.3)
         holder["summary"] = s
         print(f"{s['dropped']} of {s['closures']} loop closures dropped, "

@@ -17,8 +17,7 @@ from pathlib import Path
 from .release import exercises, read_notebook
 
 __all__ = ["WORDS_PER_MINUTE", "MINUTES_PER_POINT", "MINUTES_PER_UNGRADED", "MINUTES_PER_POINT_OF",
-           "chapter_rows",
-           "pacing_table"]
+           "OPTIONAL_MODULES", "module_of", "chapter_rows", "pacing_table"]
 
 #: Reading pace of the chapters' text (words per minute): an assumption, stated.
 WORDS_PER_MINUTE = 50
@@ -28,6 +27,15 @@ MINUTES_PER_UNGRADED = 20
 #: Chapters whose points stand for more work than one function each: the capstone's eight
 #: points grade a whole filter (minutes per point there).
 MINUTES_PER_POINT_OF = {"09_capstone": 20}
+#: The optional modules a class may leave out (INSTRUCTOR.md's plans, the course map); every
+#: other chapter is the core.
+OPTIONAL_MODULES = {"paper": ("07_ann_training", "08_ann_slam_verdict"),
+                    "beyond": ("10_beyond_the_ekf",)}
+
+
+def module_of(notebook: str) -> str:
+    """'core', or the name of the optional module (:data:`OPTIONAL_MODULES`) holding it."""
+    return next((m for m, names in OPTIONAL_MODULES.items() if notebook in names), "core")
 
 
 def _words(nb) -> int:
@@ -59,7 +67,8 @@ def chapter_rows(paths) -> list[dict]:
         reading = words / WORDS_PER_MINUTE
         per_point = MINUTES_PER_POINT_OF.get(path.stem, MINUTES_PER_POINT)
         work = points * per_point + len(ungraded) * MINUTES_PER_UNGRADED
-        rows.append({"notebook": path.stem, "words": words, "points": points,
+        rows.append({"notebook": path.stem, "module": module_of(path.stem), "words": words,
+                     "points": points,
                      "ungraded": ungraded, "reading_min": 5 * round(reading / 5),
                      "exercise_min": 5 * round(work / 5),
                      "total_min": 5 * round((reading + work) / 5)})
@@ -67,14 +76,24 @@ def chapter_rows(paths) -> list[dict]:
 
 
 def pacing_table(paths) -> str:
-    """:func:`chapter_rows` as a Markdown table, with the total."""
+    """:func:`chapter_rows` as a Markdown table, with the totals of the core, of the core with
+    each optional module, and of everything."""
     rows = chapter_rows(paths)
-    out = ["| chapter | words | graded points | ungraded exercises | reading (min) | exercises (min) "
-           "| total (h) |", "|---|---|---|---|---|---|---|"]
+    out = ["| chapter | module | words | graded points | ungraded exercises | reading (min) "
+           "| exercises (min) | total (h) |", "|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        out.append(f"| `{r['notebook']}` | {r['words']} | {r['points']:g} | {len(r['ungraded'])} | "
-                   f"{r['reading_min']} | {r['exercise_min']} | {r['total_min'] / 60:.1f} |")
-    total = sum(r["total_min"] for r in rows)
-    out.append(f"| all | {sum(r['words'] for r in rows)} | {sum(r['points'] for r in rows):g} | "
-               f"{sum(len(r['ungraded']) for r in rows)} | | | {total / 60:.1f} |")
+        out.append(f"| `{r['notebook']}` | {r['module']} | {r['words']} | {r['points']:g} | "
+                   f"{len(r['ungraded'])} | {r['reading_min']} | {r['exercise_min']} | "
+                   f"{r['total_min'] / 60:.1f} |")
+
+    def total(label, keep):
+        sel = [r for r in rows if r["module"] in keep]
+        out.append(f"| {label} | | {sum(r['words'] for r in sel)} | "
+                   f"{sum(r['points'] for r in sel):g} | {sum(len(r['ungraded']) for r in sel)} "
+                   f"| | | {sum(r['total_min'] for r in sel) / 60:.1f} |")
+
+    total("core", {"core"})
+    for name in OPTIONAL_MODULES:
+        total(f"core + {name}", {"core", name})
+    total("all", {"core", *OPTIONAL_MODULES})
     return "\n".join(out)

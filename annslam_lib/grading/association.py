@@ -286,7 +286,7 @@ def _assign_scenes() -> list[tuple[str, np.ndarray, float, float]]:
          np.array([[2.0, 4.0, 50.0], [1.0, 50.0, 50.0], [50.0, 3.0, 8.0]]), G, N),
         ("between the gate and the new-landmark threshold", np.array([[12.0, 40.0]]), G, N),
         ("beyond the new-landmark threshold of every landmark",
-         np.array([[19.0, 25.0], [30.0, 18.5]]), G, N),
+         np.array([[24.0, 30.0], [35.0, 23.5]]), G, N),
         ("near one landmark, far from the other", np.array([[40.0, 15.0]]), G, N),
         ("an empty map", np.zeros((3, 0)), G, N),
         ("no measurements", np.zeros((0, 4)), G, N),
@@ -294,8 +294,8 @@ def _assign_scenes() -> list[tuple[str, np.ndarray, float, float]]:
         ("greedy, not the optimal assignment", np.array([[1.0, 2.0], [2.0, 8.0]]), G, N),
         ("a 99.9 % gate (use the gate argument)", np.array([[12.0, 40.0]]),
          float(chi2.ppf(0.999, 2)), N),
-        ("a higher new-landmark threshold (use the argument)", np.array([[19.0, 25.0]]), G,
-         float(chi2.ppf(0.99999, 2))),
+        ("a higher new-landmark threshold (use the argument)", np.array([[24.0, 33.0]]), G,
+         float(chi2.ppf(1 - 1e-7, 2))),
     ]
 
 

@@ -698,7 +698,7 @@ def _cell(text: str) -> str:
     return text.replace(r"\|", r"\Vert ").replace("|", r"\|").replace("\n", " ")
 
 
-def errata_markdown(entries=None, *, formulas: str = "inline") -> str:
+def errata_markdown(entries=None, *, formulas: str = "inline", collapsed: bool = False) -> str:
     """The errata as a Markdown table (the README's table is this output, tested):
     section, quantity, printed form, correct form, kind, and the measured
     discrepancy of the printed and the corrected form (see :class:`Erratum`); one below
@@ -708,10 +708,19 @@ def errata_markdown(entries=None, *, formulas: str = "inline") -> str:
     ``formulas="below"`` (the chapters' form) keeps the table narrow, section, quantity,
     kind and the two discrepancies, and lists the printed and correct formulas under it,
     one line per erratum, where long formulas wrap instead of pushing the error columns
-    off the page. ``entries``: records or keys, all errata by default."""
+    off the page. ``entries``: records or keys, all errata by default. ``collapsed``: the
+    table inside a closed ``<details>`` box whose summary counts the misprints and the
+    confirmed equations (the core chapters' form: the paper thread is there to open, not in
+    the way)."""
     if formulas not in ("inline", "below"):
         raise ValueError(f"formulas must be 'inline' or 'below', got {formulas!r}")
     rows = errata_table(entries)
+    if collapsed:
+        table = errata_markdown([r["key"] for r in rows], formulas=formulas)
+        wrong = sum(r["kind"] != "correct" for r in rows)
+        summary = (f"The paper's printed forms: {wrong} misprint{'s' * (wrong != 1)}, "
+                   f"{len(rows) - wrong} confirmed (the paper thread; open to read)")
+        return f"<details>\n<summary>{summary}</summary>\n\n{table}\n\n</details>"
     if formulas == "inline":
         lines = ["| § | quantity | printed | correct | kind | error printed | error corrected |",
                  "|---|---|---|---|---|---|---|"]

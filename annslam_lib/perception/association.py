@@ -24,7 +24,7 @@ from .. import _checks
 from ..models.geometry import wrap_angle, wrap_difference
 from ..models.uncertainty import chi2_quantile
 
-__all__ = ["gate_threshold", "GATE", "NEW_LANDMARK", "NEW", "REJECTED", "mahalanobis",
+__all__ = ["gate_threshold", "GATE", "NEW_LANDMARK", "NEW_LANDMARK_PROB", "NEW", "REJECTED", "mahalanobis",
            "associate", "score_association", "gate_experiment", "mahalanobis_fast",
            "associate_fast"]
 
@@ -42,10 +42,13 @@ def gate_threshold(prob: float = 0.99, dof: int = 2) -> float:
 
 #: Default gate: 99 % (d2 <= 9.21).
 GATE = gate_threshold(0.99)
-#: Default new-landmark threshold: 99.99 % (d2 > 18.42 to every landmark). A measurement
-#: of a known landmark lands beyond it once in 10,000 times, i.e. about once in a whole
-#: Car Park run (883 beacon detections): duplicates stay rare.
-NEW_LANDMARK = gate_threshold(0.9999)
+#: Default new-landmark probability, 99.999 %: the one threshold of every chapter and of
+#: ``SlamConfig.new_landmark_prob``. A measurement of a known landmark lands beyond it once
+#: in 100,000 times, about once in a hundred Car Park runs (883 beacon detections each):
+#: duplicates stay rare.
+NEW_LANDMARK_PROB = 0.99999
+#: Default new-landmark threshold, d2 > 23.03 to every landmark.
+NEW_LANDMARK = gate_threshold(NEW_LANDMARK_PROB)
 
 
 def mahalanobis(z, zhat, S) -> np.ndarray:
@@ -167,7 +170,7 @@ def score_association(assign, predicted_ids, true_ids) -> dict:
             "new_rejected": int(np.sum(~known & (assign == REJECTED)))}
 
 
-def gate_experiment(dataset, mapped, P, R, probs, *, new_prob: float = 0.9999,
+def gate_experiment(dataset, mapped, P, R, probs, *, new_prob: float = NEW_LANDMARK_PROB,
                     S_scale: float = 1.0, seed: int = 0) -> list[dict]:
     """Association on a simulated run with a known pose error (notebook 04 "too small,
     too large").

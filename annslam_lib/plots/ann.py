@@ -47,7 +47,7 @@ import numpy as np
 
 from .. import ann
 from .blit import log_limits
-from .style import BEACON_STYLE, FIG_WIDTH, axes
+from .style import BEACON_STYLE, BLUE, FIG_WIDTH, GREEN, ORANGE, RED, axes
 from ..evaluation.map import point_rmse
 
 __all__ = ["PART_LABELS", "PART_COLORS", "plot_performance", "set_performance",
@@ -58,8 +58,8 @@ __all__ = ["PART_LABELS", "PART_COLORS", "plot_performance", "set_performance",
 #: nntool's names of the parts.
 PART_LABELS = {"train": "Training", "val": "Validation", "test": "Test", "all": "All"}
 #: nntool's colours of the parts.
-PART_COLORS = {"train": "tab:blue", "val": "tab:green", "test": "tab:red", "all": "0.3"}
-_ZERO_COLOR = "tab:orange"
+PART_COLORS = {"train": BLUE, "val": GREEN, "test": RED, "all": "0.3"}
+_ZERO_COLOR = ORANGE
 
 
 def _performance_data(model):
@@ -154,7 +154,7 @@ def performance_limits(models) -> tuple[tuple[float, float], tuple[float, float]
 
 # --------------------------------------------------------------------------- Figure 6
 
-def _histogram_data(source, ts, split, bins) -> dict:
+def _histogram_data(source, ts, split, bins, span=None) -> dict:
     if isinstance(source, dict):
         missing = [k for k in ("edges", "counts") if k not in source]
         if missing:
@@ -163,16 +163,18 @@ def _histogram_data(source, ts, split, bins) -> dict:
     if callable(getattr(source, "predict", None)):
         if ts is None or split is None:
             raise ValueError("plot_error_histogram(model, ...) needs the TrainingSet and the Split")
-        return ann.error_histogram(source, ts, split, bins)
+        return ann.error_histogram(source, ts, split, bins, span=span)
     raise ValueError("source must be ann.error_histogram's dict or a model (TrainedModel, "
                      "InverseModel), got "
                      f"{type(source).__name__}")
 
 
-def plot_error_histogram(source, ts=None, split=None, *, bins: int = 20, ax=None):
+def plot_error_histogram(source, ts=None, split=None, *, bins: int = 20, span=None, ax=None):
     """The error histogram (paper Figure 6): stacked bars of the errors target - output of
-    each part in equal bins, and the zero-error line (module docstring for ``source``)."""
-    h = _histogram_data(source, ts, split, bins)
+    each part in equal bins, and the zero-error line (module docstring for ``source``;
+    ``span``: :func:`annslam_lib.ann.error_histogram`'s, the title says how many errors the
+    end bins hold from beyond)."""
+    h = _histogram_data(source, ts, split, bins, span)
     edges = np.asarray(h["edges"], dtype=float)
     nb = edges.size - 1
     if nb < 1 or not np.all(np.diff(edges) > 0):
@@ -190,8 +192,11 @@ def plot_error_histogram(source, ts=None, split=None, *, bins: int = 20, ax=None
                edgecolor="k", lw=0.4, label=PART_LABELS[p], gid=f"bars_{p}")
         bottom = bottom + c
     ax.axvline(0.0, color=_ZERO_COLOR, lw=2, label="Zero Error", gid="zero_error")
-    ax.set(xlabel="Errors = Targets - Outputs (m)", ylabel="Instances",
-           title=f"Error Histogram with {nb} Bins")
+    beyond = sum(h.get("beyond", {}).values())
+    title = f"Error Histogram with {nb} Bins"
+    if beyond:
+        title += f" ({beyond} errors beyond them counted in the end bins)"
+    ax.set(xlabel="Errors = Targets - Outputs (m)", ylabel="Instances", title=title)
     ax.legend(fontsize=9)
     return ax.figure
 
@@ -242,7 +247,7 @@ def plot_regression(source, ts=None, split=None, *, kind: str = "position", axes
                ylabel=f"Output ~= {d['slope']:.3g}*Target {'-' if d['intercept'] < 0 else '+'} "
                       f"{abs(d['intercept']):.2g}",
                title=f"{PART_LABELS[p]}: R={d['r']:.5g}")
-        ax.legend(loc="upper left", fontsize=8)
+        ax.legend(loc="upper left")
     fig = axes[0].figure
     if kind in ("position", "correction") and not isinstance(source, dict):
         fig.suptitle(f"Regression ({kind})")
@@ -266,21 +271,21 @@ def plot_activations(axes=None, s_max: float = 3.0):
         raise ValueError(f"axes must be two axes (values, derivatives), got {len(axes)}")
     s = np.linspace(-s_max, s_max, 601)
     a0, a1 = axes
-    a0.plot(s, np.sign(s), color="tab:red", lw=2, label="sign(s)  (paper)", gid="sign")
-    a0.plot(s, np.tanh(s), color="tab:blue", lw=2, label="tanh(s)  (hidden layer)", gid="tanh")
+    a0.plot(s, np.sign(s), color=RED, lw=2, label="sign(s)  (paper)", gid="sign")
+    a0.plot(s, np.tanh(s), color=BLUE, lw=2, label="tanh(s)  (hidden layer)", gid="tanh")
     a0.plot(s, s, color="0.5", ls="--", lw=1, label="s  (linear output)", gid="linear")
     a0.set(xlabel="s = <w, x> + b", ylabel="unit output", ylim=(-1.6, 1.6),
            title="What a unit can output")
-    a1.plot(s, np.zeros_like(s), color="tab:red", lw=2, label="d sign / ds = 0 (s != 0)",
+    a1.plot(s, np.zeros_like(s), color=RED, lw=2, label="d sign / ds = 0 (s != 0)",
             gid="dsign")
-    a1.plot(s, 1.0 - np.tanh(s) ** 2, color="tab:blue", lw=2, label="d tanh / ds = 1 - tanh^2",
+    a1.plot(s, 1.0 - np.tanh(s) ** 2, color=BLUE, lw=2, label="d tanh / ds = 1 - tanh^2",
             gid="dtanh")
-    a1.plot([0], [0], "o", mfc="white", mec="tab:red", ms=8, gid="jump")
+    a1.plot([0], [0], "o", mfc="white", mec=RED, ms=8, gid="jump")
     a1.set(xlabel="s", ylabel="derivative", ylim=(-0.2, 1.2),
            title="What back-propagation sees")
     for a in axes:
         a.axhline(0, color="k", lw=0.5)
-        a.legend(fontsize=8, loc="upper left")
+        a.legend(loc="upper left")
         a.grid(alpha=0.3)
     if a0.figure.get_layout_engine() is None:   # the course style lays out already
         a0.figure.tight_layout()
@@ -311,7 +316,7 @@ def plot_rmse_comparison(rows, ax=None):
     w = 0.38
     bb = ax.bar(x - w / 2, base, w, color="0.7", edgecolor="k", lw=0.5,
                 label="inverse model (no network)", gid="base")
-    ba = ax.bar(x + w / 2, mean, w, yerr=std, capsize=4, color="tab:blue", edgecolor="k", lw=0.5,
+    ba = ax.bar(x + w / 2, mean, w, yerr=std, capsize=4, color=BLUE, edgecolor="k", lw=0.5,
                 label="network (mean +- std over seeds)", gid="ann")
     for bars, vals, err in ((bb, base, np.zeros(len(rows))), (ba, mean, std)):
         for rect, v, e in zip(bars, vals, err):                # label above the error bar
@@ -319,7 +324,7 @@ def plot_rmse_comparison(rows, ax=None):
                         xytext=(0, 3), textcoords="offset points", ha="center", fontsize=8)
     ax.set_xticks(x, labels, fontsize=8)
     ax.set(ylabel="held-out RMSE (m)", ylim=(0, 1.25 * max(max(base), max(np.add(mean, std)))))
-    ax.legend(fontsize=8, loc="upper right")
+    ax.legend(loc="upper right")
     ax.grid(axis="y", alpha=0.3)
     return ax.figure
 
@@ -343,12 +348,12 @@ def plot_landmark_errors(base, predicted, target, ax=None, title: str = ""):
     rms = [point_rmse(e) for e in (eb, ep)]
     ax.plot(eb[:, 0], eb[:, 1], ".", color="0.55", ms=3, gid="base",
             label=f"inverse model g(prior, z): RMSE {rms[0]:.3f} m")
-    ax.plot(ep[:, 0], ep[:, 1], ".", color="tab:blue", ms=3, gid="predicted", zorder=6,
+    ax.plot(ep[:, 0], ep[:, 1], ".", color=BLUE, ms=3, gid="predicted", zorder=6,
             label=f"network: RMSE {rms[1]:.3f} m")
     ax.scatter([0.0], [0.0], label="true beacon", gid="beacon", **BEACON_STYLE)
     lim = 1.1 * float(np.max(np.abs(np.concatenate([eb, ep])))) if eb.size else 1.0
     ax.set(xlim=(-lim, lim), ylim=(-lim, lim), aspect="equal", title=title,
            xlabel="estimate - true beacon, x [m]", ylabel="estimate - true beacon, y [m]")
-    ax.legend(fontsize=8, loc="upper left")
+    ax.legend(loc="upper left")
     ax.grid(alpha=0.3)
     return ax.figure

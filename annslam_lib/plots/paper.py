@@ -8,7 +8,7 @@ import numpy as np
 from ..evaluation.summary import pose_trace
 from ..paper.study import CONFIGURATIONS, Study
 from .blit import log_limits
-from .style import FIG_WIDTH
+from .style import BLUE, FIG_WIDTH, GREEN, PURPLE, RED
 
 __all__ = ["plot_pose_trace", "plot_transfer", "plot_r_scale", "set_r_scale", "r_scale_moving",
            "r_scale_trace_limits"]
@@ -23,7 +23,7 @@ def plot_pose_trace(st: Study, ax=None, *, configs=("beacons", "natural", "ann",
         _, ax = plt.subplots(figsize=(FIG_WIDTH, 3.8))
     runs = {"beacons": st.results["beacons"], "natural": st.results["natural"],
             "ann": st.results["ann"][0], "control": st.results["control"][0]}
-    colors = {"beacons": "tab:blue", "natural": "tab:green", "ann": "tab:red", "control": "0.4"}
+    colors = {"beacons": BLUE, "natural": GREEN, "ann": RED, "control": "0.4"}
     t_end = 0.0
     for k in configs:
         t, tr = pose_trace(runs[k])
@@ -34,7 +34,7 @@ def plot_pose_trace(st: Study, ax=None, *, configs=("beacons", "natural", "ann",
     ax.set(yscale="log", xlabel="t [s]", ylabel="P_xx + P_yy [m²]", xlim=(0.0, t_end),
            title="position uncertainty after each scan")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.18), ncol=3)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.18), ncol=3)
     return ax
 
 
@@ -49,15 +49,15 @@ def plot_transfer(transfers: dict, ax=None):
     names = list(transfers)
     for i, name in enumerate(names):
         tr = transfers[name]
-        for dx, v, color, label in ((-0.18, tr.plain, "tab:blue", "plain EKF-SLAM"),
-                                    (0.18, tr.ann, "tab:red", "ANN-enhanced")):
+        for dx, v, color, label in ((-0.18, tr.plain, BLUE, "plain EKF-SLAM"),
+                                    (0.18, tr.ann, RED, "ANN-enhanced")):
             ax.bar(i + dx, v.mean(), width=0.34, color=color, alpha=0.35,
                    label=label if i == 0 else None)
             ax.plot(np.full(v.size, i + dx), v, "o", color=color, ms=4)
     ax.set_xticks(range(len(names)), [n.replace(", ", "\n") for n in names], fontsize=8)
     ax.set(ylabel="map RMSE [m]", title="a network trained on the loop, layout 0, used elsewhere")
     ax.grid(True, axis="y", alpha=0.3)
-    ax.legend(fontsize=8)
+    ax.legend()
     return ax
 
 
@@ -74,42 +74,42 @@ def plot_r_scale(sweep: dict, scale: float, reference: dict | None = None, fig=N
     ks = np.array(sorted(sweep))
     s = sweep[scale]
     if 1.0 in sweep:            # hidden at k = 1 (the k line is the same): see set_r_scale
-        a0.plot(sweep[1.0]["t"], sweep[1.0]["trace"], color="tab:blue", lw=1,
+        a0.plot(sweep[1.0]["t"], sweep[1.0]["trace"], color=BLUE, lw=1,
                 label="beacons-only, R × 1" if scale != 1.0 else "_trace_1", gid="trace_1",
                 visible=scale != 1.0)
     a0.plot(s["t"], s["trace"], color="k", lw=1.2, label=f"beacons-only, R × {scale:g}",
             gid="trace_k")
     if reference is not None:
-        a0.plot(reference["t"], reference["trace"], color="tab:red", lw=1, ls="--",
+        a0.plot(reference["t"], reference["trace"], color=RED, lw=1, ls="--",
                 label=reference["label"], gid="trace_ref")
     a0.set(xlabel="t (s)", ylabel="P_xx + P_yy (m²)", yscale="log",
            title="position variance after each scan")
-    a0.legend(fontsize=7)
+    a0.legend()
     trace = np.array([sweep[k]["pose_trace"] for k in ks])
-    a1.plot(ks, trace, "o-", color="tab:blue", gid="mean_trace")
+    a1.plot(ks, trace, "o-", color=BLUE, gid="mean_trace")
     a1.plot([scale], [s["pose_trace"]], "s", ms=11, mfc="none", mec="k", mew=1.5, gid="current")
     rmse = np.array([sweep[k]["map_rmse"] for k in ks])
     aligned = np.array([sweep[k]["map_rmse_aligned"] for k in ks])
-    a2.plot(ks, rmse, "o-", color="tab:purple", label="map RMSE, absolute", gid="map_rmse")
-    a2.plot(ks, aligned, "o-", color="tab:green", label="map RMSE, aligned",
+    a2.plot(ks, rmse, "o-", color=PURPLE, label="map RMSE, absolute", gid="map_rmse")
+    a2.plot(ks, aligned, "o-", color=GREEN, label="map RMSE, aligned",
             gid="map_rmse_aligned")
     a2.plot([scale, scale], [s["map_rmse"], s["map_rmse_aligned"]], "s", ms=11, mfc="none",
             mec="k", mew=1.5, gid="current_map")
     if reference is not None:
-        a1.axhline(reference["pose_trace"], color="tab:red", ls="--", label=reference["label"],
+        a1.axhline(reference["pose_trace"], color=RED, ls="--", label=reference["label"],
                    gid="ref_trace")
-        a2.axhline(reference["map_rmse"], color="tab:red", ls="--",
+        a2.axhline(reference["map_rmse"], color=RED, ls="--",
                    label=f"{reference['label']}, absolute", gid="ref_map_rmse")
-        a2.axhline(reference["map_rmse_aligned"], color="tab:red", ls=":",
+        a2.axhline(reference["map_rmse_aligned"], color=RED, ls=":",
                    label=f"{reference['label']}, aligned", gid="ref_map_rmse_aligned")
-        a1.legend(fontsize=7)
+        a1.legend()
     a1.set(xscale="log", yscale="log", xlabel="R scale k", ylabel="mean P_xx + P_yy (m²)",
            title="uncertainty: falls with the R it is told")
     a2.set(xscale="log", xlabel="R scale k", ylabel="m", ylim=(0, 1.3 * max(rmse.max(), 0.01)),
            title="map error: does not improve")
-    a2.legend(fontsize=7)
+    a2.legend()
     for ax in (a1, a2):
-        ax.set_xticks(ks, [f"{k:g}" for k in ks], fontsize=7)
+        ax.set_xticks(ks, [f"{k:g}" for k in ks], fontsize=8)
         ax.minorticks_off()
         ax.grid(alpha=0.3)
     if fig.get_layout_engine() is None:      # the course style already lays out (constrained)
@@ -147,7 +147,7 @@ def set_r_scale(fig, sweep: dict, scale: float):
     _by_gid(fig, "current").set_data([scale], [s["pose_trace"]])
     _by_gid(fig, "current_map").set_data([scale, scale], [s["map_rmse"], s["map_rmse_aligned"]])
     old = a0.get_legend()
-    new = a0.legend(fontsize=7)
+    new = a0.legend()
     return old, new
 
 

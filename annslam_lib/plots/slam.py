@@ -17,7 +17,7 @@ import numpy as np
 
 from ..evaluation.consistency import Consistency, correlation_matrix
 from ..models.uncertainty import ellipse_points
-from .style import BEACON_STYLE, FIG_WIDTH, axes
+from .style import BEACON_STYLE, BLUE, FIG_WIDTH, axes
 
 __all__ = ["CAR_PARK_LIMITS", "plot_consistency", "plot_correlation", "true_path",
            "plot_true_vs_mapped", "plot_landmark_zooms"]
@@ -27,7 +27,7 @@ CAR_PARK_LIMITS = ((-10.0, 20.0), (-25.0, 20.0))
 
 
 def plot_consistency(stats: Consistency, ax=None, *, expected: float | None = 1.0,
-                     color: str = "tab:blue", label: str | None = None, title: str | None = None):
+                     color: str = BLUE, label: str | None = None, title: str | None = None):
     """The statistic over time with its band shaded and the expected value dashed
     (``expected``: dof for a NEES average, 1 for NIS / dof; None: not drawn)."""
     ax = axes(ax, figsize=(FIG_WIDTH, 3.5))
@@ -39,7 +39,7 @@ def plot_consistency(stats: Consistency, ax=None, *, expected: float | None = 1.
         ax.axhline(expected, color="k", ls="--", lw=0.8, label=f"expected {expected:g}")
     ax.set(xlabel="t [s]", ylabel=stats.name, title=title or "")
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8, loc="upper right")
+    ax.legend(loc="upper right")
     return ax
 
 
@@ -60,8 +60,8 @@ def plot_correlation(P, ax=None, *, n_pose: int = 3, title: str = "correlation o
     step = max(1, m // 8)
     ticks = list(range(n_pose)) + [n_pose + 2 * j + 0.5 for j in range(0, m, step)]
     names = ["x", "y", "φ"][:n_pose] + [f"L{j}" for j in range(0, m, step)]
-    ax.set_xticks(ticks, names, fontsize=7)
-    ax.set_yticks(ticks, names, fontsize=7)
+    ax.set_xticks(ticks, names, fontsize=8)
+    ax.set_yticks(ticks, names, fontsize=8)
     ax.set_title(title)
     if colorbar:
         ax.figure.colorbar(im, ax=ax, fraction=0.046, pad=0.04, label="correlation")
@@ -79,7 +79,7 @@ def true_path(dataset) -> tuple[np.ndarray, str]:
 
 
 def plot_true_vs_mapped(result, dataset=None, ax=None, *, n_sigma: float = 2.0,
-                        ellipse_scale: float = 1.0, limits=None, color: str = "tab:blue",
+                        ellipse_scale: float = 1.0, limits=None, color: str = BLUE,
                         label: str = "mapped", show_truth: bool = True, title: str | None = None,
                         legend: str | None = "below"):
     """The paper's Figure 5: true path and landmarks against the mapped ones, each mapped
@@ -126,16 +126,16 @@ def plot_true_vs_mapped(result, dataset=None, ax=None, *, n_sigma: float = 2.0,
         ax.set_title(title)
     ax.grid(True, alpha=0.3)
     if legend == "below":
-        ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=2)
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=2)
     elif legend is not None:
-        ax.legend(fontsize=8, loc=legend)
+        ax.legend(loc=legend)
     return ax
 
 
 
 def plot_landmark_zooms(landmarks, landmark_cov, true_landmarks, i_mapped, j_true, *,
                         n_sigma: float = 2.0, half_width: float = 0.25, ncols: int = 5,
-                        color: str = "tab:blue", axes=None):
+                        color: str = BLUE, axes=None):
     """One small panel per matched pair (``evaluation.map.match_landmarks``): the true
     landmark (star), the mapped one (cross) and its ``n_sigma`` ellipse, at TRUE scale in
     a square of +-``half_width`` m around the true position. Each title gives the error

@@ -12,13 +12,15 @@ import functools
 import io
 
 import matplotlib.pyplot as plt
+from cycler import cycler
 import numpy as np
 from matplotlib.figure import Figure
 
 __all__ = ["notebook_setup", "axes", "figure", "widget_figure", "show_widget_figure", "show_png",
            "render_png",
            "layout_signature",
-           "BEACON_STYLE", "FIG_WIDTH", "DPI"]
+           "BEACON_STYLE", "FIG_WIDTH", "DPI", "PALETTE", "BLUE", "ORANGE", "GREEN", "RED",
+           "PURPLE", "SKY", "BLACK", "GREY"]
 
 #: Width of a full-width figure (inches) and the resolution of the notebook's images: a
 #: figure FIG_WIDTH wide at DPI fills about 1000 px, the text column of JupyterLab at
@@ -26,7 +28,15 @@ __all__ = ["notebook_setup", "axes", "figure", "widget_figure", "show_widget_fig
 FIG_WIDTH = 11.0
 DPI = 90
 
-BEACON_STYLE = dict(marker="*", s=140, color="tab:red", edgecolor="k", linewidth=0.5, zorder=5)
+#: The course's colours: Okabe and Ito's palette ("Color Universal Design", 2008), whose
+#: colours stay apart for readers with any common colour-vision deficiency. RED and GREEN
+#: are its vermillion and bluish green, which differ in lightness as well as hue.
+BLUE, ORANGE, GREEN, RED = "#0072B2", "#E69F00", "#009E73", "#D55E00"
+PURPLE, SKY, BLACK, GREY = "#CC79A7", "#56B4E9", "#000000", "#666666"
+#: The colour cycle of every figure (``notebook_setup``).
+PALETTE = (BLUE, ORANGE, GREEN, RED, PURPLE, SKY, BLACK, GREY)
+
+BEACON_STYLE = dict(marker="*", s=140, color=RED, edgecolor="k", linewidth=0.5, zorder=5)
 
 
 def widget_figure(nrows: int = 1, ncols: int = 1, *, figsize, layout=None, **subplots_kw):
@@ -170,6 +180,7 @@ def notebook_setup(*, precision: int = 3, linewidth: int = 110) -> None:
         "figure.constrained_layout.use": True, "font.size": 10, "axes.titlesize": 11,
         "axes.labelsize": 10, "legend.fontsize": 9, "xtick.labelsize": 9,
         "ytick.labelsize": 9, "legend.framealpha": 0.85, "axes.grid": False,
+        "axes.prop_cycle": cycler(color=PALETTE),
     })
 
 

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 from .. import _checks
 from ..data import filter_defaults
+from ..perception.association import NEW_LANDMARK_PROB
 
 __all__ = ["SlamConfig", "GPS_MODES", "ASSOCIATIONS", "MAP_MODES", "MOTION_MODELS", "LANDMARK_MODELS"]
 
@@ -145,7 +146,7 @@ class SlamConfig:
     association: str = "nn"
     jcbb_max_nodes: int = 10_000
     gate_prob: float = 0.99
-    new_landmark_prob: float = 0.99999
+    new_landmark_prob: float = NEW_LANDMARK_PROB
     landmark_min_observations: int = 1
     landmark_probation: float = 2.0
     first_estimates: bool = False

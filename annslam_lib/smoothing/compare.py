@@ -34,6 +34,7 @@ from ..evaluation.map import map_errors
 from ..evaluation.trajectory import gps_outliers, trajectory_errors
 from .problem import build_problem
 from .solve import solve_batch, solve_isam2
+from ..plots.style import BLUE, GREEN, PURPLE, RED
 
 __all__ = ["DATASETS", "ESTIMATORS", "valid_fixes", "compare", "compare_dataset",
            "write_comparison", "plot_comparison"]
@@ -105,37 +106,37 @@ def plot_comparison(rows, extras):
     names = list(extras)
     fig, axes = plt.subplots(len(names), 2, figsize=(11, 4.6 * len(names)), squeeze=False,
                              layout="constrained")
-    colour = {"ekf": "tab:red", "isam2": "tab:green", "batch": "k"}
+    colour = {"ekf": RED, "isam2": GREEN, "batch": "k"}
     for (ax, ax2), name in zip(axes, names):
         x = extras[name]
-        ax.plot(x["gps"].east, x["gps"].north, ".", ms=2, color="tab:blue", label="GPS (valid)")
+        ax.plot(x["gps"].east, x["gps"].north, ".", ms=2, color=BLUE, label="GPS (valid)")
         for est in ESTIMATORS:
             row = next(r for r in rows if r["dataset"] == name and r["estimator"] == est)
             tr = x["tracks"][est]
             ax.plot(tr[:, 1], tr[:, 2], "-", lw=0.8, color=colour[est],
                     label=f"{est}: {row['traj_rmse_m']:.2f} m ({row['traj_rmse_aligned_m']:.2f} aligned)")
         if x["beacons"] is not None:
-            ax.plot(*x["beacons"].T, "s", mfc="none", color="tab:purple", label="surveyed beacons")
+            ax.plot(*x["beacons"].T, "s", mfc="none", color=PURPLE, label="surveyed beacons")
         ax.plot(*x["maps"]["batch"].T, "+", color="k", ms=5, label="batch map")
         ax.set_aspect("equal", adjustable="datalim")
         ax.set_title(f"{name}: tracks against GPS (RMSE absolute, aligned)")
         ax.set_xlabel("East (m)")
         ax.set_ylabel("North (m)")
-        ax.legend(fontsize=7, loc="best")
+        ax.legend(loc="best")
         step = np.asarray(x["step_cpu"]) * 1e3
-        ax2.plot(x["step_landmarks"], step, ".", ms=2, color="tab:green", alpha=0.4,
+        ax2.plot(x["step_landmarks"], step, ".", ms=2, color=GREEN, alpha=0.4,
                  label="iSAM2, one update")
         if step.size >= 25:
             k = 25
             med = np.array([np.median(step[max(0, i - k):i + k]) for i in range(step.size)])
-            ax2.plot(x["step_landmarks"], med, "-", color="tab:green", label="iSAM2, running median")
-        ax2.axhline(x["ekf_cpu_per_scan"] * 1e3, color="tab:red",
+            ax2.plot(x["step_landmarks"], med, "-", color=GREEN, label="iSAM2, running median")
+        ax2.axhline(x["ekf_cpu_per_scan"] * 1e3, color=RED,
                     label="EKF, mean per scan (whole run / scans)")
         ax2.set_yscale("log")
         ax2.set_xlabel("landmarks in the map")
         ax2.set_ylabel("CPU per step (ms)")
         ax2.set_title(f"{name}: cost per step as the map grows")
-        ax2.legend(fontsize=7)
+        ax2.legend()
     return fig
 
 
