@@ -6,7 +6,6 @@ Euler for the midpoint step, a gate without the pose's uncertainty or without mu
 exclusion or adding landmarks, an unwrapped bearing, a covariance reported twice or half as
 large) loses points with a message that names it; a correct variant (a batch update of
 the gated sightings) passes; and the sandboxed grader does the same."""
-import math
 
 import numpy as np
 import pytest

@@ -271,3 +271,23 @@ def test_exercise_headings_have_one_form_and_run_in_order(path):
     setups = sum(len(re.findall(r"^chapter\.setup\(", c.source, re.M))
                  for c in nb.cells if c.cell_type == "code")
     assert setups == 1, f"{path.name} calls chapter.setup() {setups} times"
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
+def test_every_ungraded_exercise_is_followed_by_its_answer_tagged_as_one(path):
+    """The written answer or discussion of an ungraded exercise is the next text cell after
+    its solution cell, tagged as the answer, so that the student version holds the stub
+    instead (an untagged answer ships to students)."""
+    from annslam_lib.course import pacing
+
+    nb = release.read_notebook(path)
+    ungraded = set(pacing._ungraded(nb))
+    for i, cell in enumerate(nb.cells):
+        gid = cell.metadata.get("nbgrader", {}).get("grade_id")
+        if gid not in ungraded:
+            continue
+        after = next((c for c in nb.cells[i + 1:] if c.cell_type == "markdown"), None)
+        assert after is not None and release.ANSWER_TAG in after.metadata.get("tags", []), \
+            f"{path.name}: the text after {gid} is not tagged {release.ANSWER_TAG!r}"
+        assert after.source.lstrip().startswith("<details>"), \
+            f"{path.name}: the answer to {gid} is not in a closed <details> box"
