@@ -185,13 +185,17 @@ def _cause(pieces) -> str:
 # ------------------------------------------------------------------------- the checks
 
 def _library_filters():
+    from ..perception import association
     from ..slam import runner
     return (loc.reference_localise, loc.reference_loc_predict, loc.reference_gate,
-            loc.reference_update, localisation.localise, localisation.beacon_update, runner.run)
+            loc.reference_update, localisation.localise, localisation.beacon_update, runner.run,
+            association.mahalanobis, association.associate, association.mahalanobis_fast,
+            association.associate_fast)
 
 
-#: The loop is the student's own filter: the course's filters and their steps are off
-#: limits (geometry, the gain, the Joseph covariance and association stay allowed).
+#: The loop is the student's own filter, built from their own pieces: the course's filters,
+#: their steps and chapter 04's association (exercises 4.1 and 4.3) are off limits; the
+#: geometry, the gain and the Joseph covariance stay allowed.
 _FORBIDS = forbids(*_library_filters())
 
 
