@@ -216,3 +216,40 @@ def test_the_sandboxed_grader_names_a_broken_augmentation(tmp_path):
     assert g.score == FULL - 5, g.report()
     assert "my_augment leaves the new landmark uncorrelated" in r["ex09-consistency-tests"].message
     assert "Opaque" not in g.report()
+
+
+def _update_with_the_course_gain(x, P, z, idx, R):
+    z, zhat, H, Rm = _stacked(x, z, idx, R)
+    K, _ = kalman_gain(P, H, Rm)
+    nu = z - zhat
+    nu[:, 1] = (nu[:, 1] + math.pi) % (2 * math.pi) - math.pi
+    x = x + K @ nu.ravel()
+    x[2] = (x[2] + math.pi) % (2 * math.pi) - math.pi
+    return x, joseph_covariance(P, H, Rm, K)
+
+
+def test_the_course_versions_of_the_students_own_pieces_are_refused():
+    """The capstone is built from the student's pieces of 1a.3, 4.1, 4.3 and 5.2: a loop
+    that calls the course's kalman_gain instead is refused, naming it."""
+    predict, associate_ = solution("09", "my_predict"), solution("09", "my_data_association")
+    augment = solution("09", "my_augment")
+
+    def my_slam(run):
+        track = cap.Track()
+        it = cap.steps(run)
+        start = next(it)
+        x, P = start.x0.copy(), start.P0.copy()
+        for step in it:
+            if isinstance(step, cap.Predict):
+                x, P = predict(x, P, step.control, step.dt, step.Q, start.vehicle)
+                continue
+            a = np.asarray(associate_(x, P, step.z, start.R, start.gate, start.new_landmark))
+            old = np.flatnonzero(a >= 0)
+            if old.size:
+                x, P = _update_with_the_course_gain(x, P, step.z[old], a[old], start.R)
+            for i in np.flatnonzero(a == -1):
+                x, P = augment(x, P, step.z[i], start.R)
+            track.record(step.t, x, P)
+        return track.result()
+    with pytest.raises(AssertionError, match="kalman_gain"):
+        gc.check_runs(my_slam, quiet=True)

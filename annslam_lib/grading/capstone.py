@@ -148,15 +148,20 @@ def _cause(pieces) -> str:
 # ------------------------------------------------------------------------- the checks
 
 def _library_filters():
+    from ..perception import association
     from ..slam import efficient, runner
     return (cap.reference_slam, cap.reference_predict, cap.reference_update,
             cap.reference_augment, cap.reference_associate, dense.range_bearing_update,
             dense.joseph_update, dense.augment_landmark, dense.DenseEkfSlam.predict,
-            dense.DenseEkfSlam.update, efficient.EkfSlam.update, runner.run)
+            dense.DenseEkfSlam.update, efficient.EkfSlam.update, runner.run,
+            dense.kalman_gain, dense.joseph_covariance, association.mahalanobis,
+            association.associate, association.mahalanobis_fast, association.associate_fast)
 
 
-#: The capstone is the student's own filter: the course's filters and their steps are off
-#: limits (geometry, the gain, the Joseph covariance and association stay allowed).
+#: The capstone is the student's own filter from their own pieces: the course's filters,
+#: their steps and the course's versions of what earlier chapters had them write (the gain
+#: of 1a.3, the d^2 and association of 4.1 and 4.3, the Joseph form of 5.2) are off limits;
+#: the geometry, the models and the midpoint step stay allowed.
 _FORBIDS = forbids(*_library_filters())
 
 
