@@ -158,3 +158,17 @@ def grade_chapter(notebook, bodies: dict, folder, limits):
     path = folder / notebook.name
     write(nb, path)
     return grade_submission(path, notebook, limits=limits)
+
+
+def both_feedbacks(check, fn) -> tuple[str, str]:
+    """(the message a student's own check gives, the instructor's full feedback) of a check
+    that fails on ``fn``."""
+    import pytest
+
+    from annslam_lib.grading.core import GradingError, full_feedback
+
+    with pytest.raises(GradingError) as plain:
+        check(fn, quiet=True)
+    with full_feedback(), pytest.raises(GradingError) as full:
+        check(fn, quiet=True)
+    return str(plain.value), str(full.value)

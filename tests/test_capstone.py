@@ -10,14 +10,15 @@ import pytest
 
 from annslam_lib.chapters import ch09_capstone as cap
 from annslam_lib.grading import capstone as gc
-from annslam_lib.grading.core import allowing_library_calls
+from annslam_lib.grading.core import GradingError, allowing_library_calls
 from annslam_lib.models.observation import observe
 from annslam_lib.slam import config, runner
 from annslam_lib.slam.dense import joseph_covariance, kalman_gain
 from solutions import solution
 
 HIDDEN = ("sim:4101:1", "sim:4102:1", "sim:4103:1", "sim:4104:1")    # the notebook's hidden runs
-FULL = 8.0
+FULL = 8.0                      # the three simulated cells (gc.score)
+GRADED = FULL + 2               # and the Car Park cell, in the grader (the analysis is read)
 
 
 def test_the_reference_loop_is_the_course_filter_on_the_car_park(car_park):
@@ -142,7 +143,7 @@ def test_the_course_grader_gives_an_honest_capstone_full_marks(tmp_path):
     notebook = ROOT / "notebooks" / "09_capstone.ipynb"
     g = gs.grade_chapter(notebook, gs.solution_bodies(notebook), tmp_path,
                          Limits(cell_timeout=240.0, call_timeout=120.0, deadline=600.0))
-    assert (g.score, g.max_score) == (FULL, FULL), g.report()
+    assert (g.score, g.max_score) == (GRADED, GRADED), g.report()
     assert g.errors == [], g.report()
 
 
@@ -213,7 +214,7 @@ def test_the_sandboxed_grader_names_a_broken_augmentation(tmp_path):
     g = gs.grade_chapter(notebook, bodies, tmp_path,
                          Limits(cell_timeout=240.0, call_timeout=120.0, deadline=600.0))
     r = {e.grade_id: e for e in g.exercises}
-    assert g.score == FULL - 5, g.report()
+    assert g.score == GRADED - 7, g.report()        # consistency and the Car Park fail
     assert "my_augment leaves the new landmark uncorrelated" in r["ex09-consistency-tests"].message
     assert "Opaque" not in g.report()
 
@@ -253,3 +254,47 @@ def test_the_course_versions_of_the_students_own_pieces_are_refused():
         return track.result()
     with pytest.raises(AssertionError, match="kalman_gain"):
         gc.check_runs(my_slam, quiet=True)
+
+
+@pytest.mark.parametrize("k, says", [(2.0, "under-confident"), (0.5, "over-confident")])
+def test_on_the_car_park_a_covariance_twice_or_half_as_large_fails(k, says):
+    """The real-data cell: the map's joint NEES against the survey (with the survey's 2 cm)
+    compared with a correct EKF's on the same run, both ways; GPS named as GPS."""
+    with allowing_library_calls():
+        ok = gc.check_car_park(cap.reference_slam, quiet=True)
+        assert "all 15 beacons mapped" in ok and "1.00 of a correct EKF's" in ok and "GPS" in ok
+        with pytest.raises(GradingError, match=says):
+            gc.check_car_park(_reports(k), quiet=True)
+
+
+def test_the_car_park_map_nees_is_chapter_05s_survey_nees():
+    """car_park_scores against real_consistency.survey_nees of chapter 05 on the same map."""
+    from types import SimpleNamespace
+
+    from annslam_lib.data import loaders
+    from annslam_lib.evaluation.map import match_landmarks
+    from annslam_lib.evaluation.real_consistency import survey_nees
+
+    r = cap.reference_slam("car_park")
+    car = loaders.load_car_park()
+    i, j = match_landmarks(r["landmarks"], car.beacons, 1.0)
+    n = len(r["landmarks"])
+    P = np.zeros((3 + 2 * n,) * 2)
+    P[3:, 3:] = r["landmark_cov"]
+    ref = survey_nees(SimpleNamespace(landmarks=r["landmarks"], covariance=P), car.beacons, i, j,
+                      sigma_survey=cap.SIGMA_SURVEY)
+    got = cap.car_park_scores(r)
+    assert got["matched"] == 15
+    assert math.isclose(got["map_nees_per_dof"], ref.per_dof, rel_tol=1e-9), (got, ref)
+
+
+def test_the_track_records_each_scans_nis_and_the_lines_give_their_verdicts():
+    r = cap.reference_slam("sim:3001:1")
+    assert r["nis"].shape == r["t"].shape and np.all(r["nis_dof"] % 2 == 0)
+    assert np.all(np.isnan(r["nis"][r["nis_dof"] == 0]))
+    lines = cap.consistency_lines(r, "sim:3001:1").splitlines()
+    assert lines[0].startswith("mean pose NEES per dof") and "band" in lines[0]
+    used = r["nis_dof"] > 0
+    assert f"{np.sum(r['nis'][used]) / r['nis_dof'].sum():.2f}" in lines[1]
+    stripped = {**r, "nis": np.full_like(r["nis"], np.nan), "nis_dof": np.zeros_like(r["nis_dof"])}
+    assert "no NIS recorded" in cap.consistency_lines(stripped, "sim:3001:1")

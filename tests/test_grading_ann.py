@@ -9,6 +9,7 @@ import torch
 from annslam_lib import ann
 from annslam_lib import paper
 from annslam_lib.grading import GradingError
+from annslam_lib.grading.core import full_feedback
 from annslam_lib.grading import ann as gk
 from solutions import solution
 
@@ -75,7 +76,10 @@ def test_forward_paper_neuron_fails_naming_the_erratum(side):
         return (h @ W2.T + b2) * y_std + y_mean
     with pytest.raises(GradingError, match=r"erratum '4\.2-ann'") as e:
         gk.check_forward(printed)
-    assert "printed" in str(e.value) and "tanh" in str(e.value) and "back-propagation" in str(e.value)
+    assert "printed" in str(e.value) and "back-propagation" in str(e.value)
+    assert "tanh" not in str(e.value)             # the transfer function is the exercise's
+    with full_feedback(), pytest.raises(GradingError, match=r"erratum '4\.2-ann'.*tanh"):
+        gk.check_forward(printed)
     # the plain np.sign student gets the same diagnosis
     with pytest.raises(GradingError, match="4.2-ann"):
         gk.check_forward(_forward_with(hidden=np.sign))
@@ -161,8 +165,8 @@ def test_mapminmax_mistakes(kind, phrase):
 
 
 @pytest.mark.parametrize("kind, phrase", [("forward", "forward mapping again"),
-                                          ("no_shift", "add xmin back"),
-                                          ("no_plus_one", "forgets the \\+1"),
+                                          ("no_shift", "does not shift back"),
+                                          ("no_plus_one", "wrong x at the ends"),
                                           ("unit", r"inverts the \[0, 1\] scaling")])
 def test_mapminmax_reverse_mistakes(kind, phrase):
     with pytest.raises(GradingError, match=phrase):
@@ -225,8 +229,29 @@ def test_each_known_loop_mistake_gets_its_message(label):
 
 def test_loop_mistake_messages_name_the_cause():
     msgs = {k: m for k, (m, _) in gk.LOOP_MISTAKES.items()}
-    assert "accumulate" in msgs["no zero_grad"] and "zero_grad()" in msgs["no zero_grad"]
+    assert "accumulate" in msgs["no zero_grad"] and "missing" in msgs["no zero_grad"]
     assert "does not decrease" in msgs["no step"] and "SUM" in msgs["sum instead of mean"]
+    # which call is missing, and the order, is what exercise 7.2 asks: not in the messages
+    assert not any("zero_grad()" in m or ".mean()" in m for m in msgs.values())
+    assert set(gk.LOOP_ANSWERS) <= set(gk.LOOP_MISTAKES)
+
+
+def test_loop_answers_are_in_the_instructors_feedback_only():
+    from grading_support import both_feedbacks
+
+    message, wrong = gk.LOOP_MISTAKES["no zero_grad"]
+    plain, full = both_feedbacks(gk.check_train_loop, wrong)
+    assert "zero_grad()" not in plain
+    assert "optimizer.zero_grad() at the start of every epoch" in full
+
+
+def test_mapminmax_formula_is_in_the_instructors_feedback_only():
+    formula = "x = (y + 1) (xmax - xmin) / 2 + xmin"
+    with pytest.raises(GradingError) as plain:
+        gk.check_mapminmax(notebook_mapminmax, gk._mm_reverse_wrong("no_shift"))
+    assert formula not in str(plain.value)
+    with full_feedback(), pytest.raises(GradingError, match=r"\(y \+ 1\)"):
+        gk.check_mapminmax(notebook_mapminmax, gk._mm_reverse_wrong("no_shift"))
 
 
 def test_train_loop_other_mistakes():

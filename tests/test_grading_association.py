@@ -11,6 +11,7 @@ from scipy.stats import chi2
 
 from annslam_lib.perception.association import NEW, REJECTED
 from annslam_lib.grading import GradingError
+from annslam_lib.grading.core import full_feedback
 from annslam_lib.grading import association as gk
 from annslam_lib.perception import association
 from solutions import solution
@@ -86,9 +87,9 @@ def d2_variant(inner, *, wrapped=True):
 @pytest.mark.parametrize("fn, phrase", [
     (d2_variant(lambda S, HPH, R: np.linalg.inv(S), wrapped=False),
      "does not wrap the bearing innovation"),
-    (d2_variant(lambda S, HPH, R: S), "computes νᵀ S ν"),
-    (d2_variant(lambda S, HPH, R: np.linalg.inv(R)), "uses R instead of S"),
-    (d2_variant(lambda S, HPH, R: np.linalg.inv(HPH)), "leaves R out of S"),
+    (d2_variant(lambda S, HPH, R: S), "weighs the innovation with S itself"),
+    (d2_variant(lambda S, HPH, R: np.linalg.inv(R)), "uses the laser's noise R alone"),
+    (d2_variant(lambda S, HPH, R: np.linalg.inv(HPH)), "leaves the measurement noise out"),
     (d2_variant(lambda S, HPH, R: np.diag(1 / np.diag(S))), "only the diagonal of S"),
     (lambda *a: math.sqrt(nb_d2(*a)), "distance, not its square"),
 ])
@@ -138,10 +139,10 @@ def test_singular_cases_are_rejected_by_the_library_too():
 
 @pytest.mark.parametrize("fn, phrase", [
     (lambda d, p: d <= chi2.ppf(p, 1), "1 degree of freedom"),
-    (lambda d, p: d <= chi2.ppf(1 - p, 2), r"chi2.ppf\(1 - prob, 2\) = −2 ln\(prob\)"),
-    (lambda d, p: d <= -2 * math.log(p), r"chi2.ppf\(1 - prob, 2\) = −2 ln\(prob\)"),
+    (lambda d, p: d <= chi2.ppf(1 - p, 2), "only the share 1 − prob"),
+    (lambda d, p: d <= -2 * math.log(p), "only the share 1 − prob"),
     (lambda d, p: math.sqrt(d) <= chi2.ppf(p, 2), "compares √d2"),
-    (lambda d, p: d <= math.sqrt(chi2.ppf(p, 2)), "compares d2 with √chi2"),
+    (lambda d, p: d <= math.sqrt(chi2.ppf(p, 2)), "square root of the threshold"),
     (lambda d, p: d <= 9.0, "'3σ' rule"),
     (lambda d, p: d <= 9.21034, "ignores prob"),
     (lambda d, p: d > chi2.ppf(p, 2), "inverted"),
@@ -152,11 +153,45 @@ def test_gate_mistakes(fn, phrase):
 
 
 def test_gate_other_errors_say_where_and_why():
-    with pytest.raises(GradingError, match=r"my_in_gate\(d2=9.3, prob=0.99\) returned True; the "
-                                           r"99 % gate is d2 <= chi2.ppf\(0.99, 2\) = 9.21"):
+    with pytest.raises(GradingError, match=r"my_in_gate\(d2=9.3, prob=0.99\) returned True, but "
+                                           r"the measurement is outside \(False\) the 99 % gate\.$"):
+        quiet(gk.check_in_gate, lambda d, p: d <= chi2.ppf(p, 3))
+    with full_feedback(), pytest.raises(GradingError, match=r"99 % gate\. The gate is "
+                                                            r"d2 <= −2 ln\(1 − prob\).* = 9.21"):
         quiet(gk.check_in_gate, lambda d, p: d <= chi2.ppf(p, 3))
     with pytest.raises(GradingError, match="should return True .* or False"):
         quiet(gk.check_in_gate, lambda d, p: chi2.ppf(p, 2))
+
+
+@pytest.mark.parametrize("check, fn, formula", [
+    (gk.check_in_gate, lambda d, p: d <= -2 * math.log(p), "−2 ln(1 − prob)"),
+    (gk.check_in_gate, lambda d, p: d <= 9.0, "−2 ln(1 − prob)"),
+    (gk.check_innovation_d2, d2_variant(lambda S, HPH, R: S), "νᵀ S⁻¹ ν"),
+    (gk.check_innovation_d2, d2_variant(lambda S, HPH, R: np.linalg.inv(R)), "S = H P H^T + R"),
+])
+def test_the_formula_is_in_the_instructors_feedback_only(check, fn, formula):
+    """The student's own check names the kind of mistake; what would hand the exercise over
+    is added only to the feedback an instructor returns (exercise 4.2 derives the gate)."""
+    with pytest.raises(GradingError) as plain:
+        quiet(check, fn)
+    assert formula not in str(plain.value)
+    with full_feedback(), pytest.raises(GradingError) as full:
+        quiet(check, fn)
+    assert formula in str(full.value) and str(full.value).startswith(str(plain.value))
+
+
+def test_the_gate_must_be_derived_not_looked_up():
+    """Exercise 4.2 derives the 2-dof quantile: a solution calling scipy's ppf is refused
+    (the rule this module's other tests switch off, see conftest.py)."""
+    from annslam_lib.grading import core
+
+    token = core._ALLOWED.set(False)
+    try:
+        with pytest.raises(GradingError, match="calls .*ppf: write it yourself"):
+            gk.check_in_gate(lambda d, p: bool(d <= chi2.ppf(p, 2)), quiet=True)
+        gk.check_in_gate(lambda d, p: bool(d <= -2 * math.log(1 - p)), quiet=True)
+    finally:
+        core._ALLOWED.reset(token)
 
 
 def test_gate_cases_straddle_each_threshold_and_the_one_dof_gap():

@@ -8,6 +8,7 @@ import pytest
 
 from annslam_lib import paper
 from annslam_lib.grading import NOT_WRITTEN, GradingError
+from annslam_lib.grading.core import full_feedback
 from annslam_lib.grading import ekf as gk
 from annslam_lib.models.observation import inverse_observe
 from annslam_lib.slam import dense
@@ -113,7 +114,7 @@ def _augment_variant(kind):
     ("ahead", r"90° off: the bearing was counted from straight ahead.*RIGHT"),
     ("no-heading", r"ignores the car's heading"),
     ("pose-only", r"cross covariance with the landmarks already in the map is zero"),
-    ("raw-R", r"as R itself.*G_z R G_z\^T"),
+    ("raw-R", r"as R itself.*carried into \(x, y\)"),
     ("no-noise", r"lacks the measurement noise"),
     ("no-pose", r"lacks the pose's uncertainty"),
     ("asymmetric", r"not symmetric at case '#0.*entry \[0, 9\] = 0"),
@@ -138,17 +139,32 @@ def _joseph_variant(kind):
 
 
 @pytest.mark.parametrize("kind, phrase", [
-    ("short", r"short form \(I - K H\) P\. It equals the Joseph form only for the optimal gain"),
-    ("short-KHP", r"short form \(I - K H\) P\."),
-    ("symmetrised", r"short form \(I - K H\) P, symmetrised"),
-    ("kskt", r"P - K S K\^T, which equals the Joseph form only for the optimal gain"),
-    ("no-krk", r"\+ K R K\^T is missing"),
+    ("short", r"a short form, right only for the optimal gain.*for ANY K"),
+    ("short-KHP", r"a short form, right only for the optimal gain"),
+    ("symmetrised", r"a short form, symmetrised"),
+    ("kskt", r"P - K S K\^T, which is the covariance only for the optimal gain"),
+    ("no-krk", r"the measurement noise is missing"),
     ("transposed", r"transposes are on the wrong side"),
-    ("ksk", r"K S K\^T instead of K R K\^T"),
+    ("ksk", r"passes the innovation covariance S through the gain"),
 ])
 def test_joseph_mistakes(kind, phrase):
     with pytest.raises(GradingError, match=phrase):
         gk.check_joseph_covariance(_joseph_variant(kind))
+
+
+@pytest.mark.parametrize("check, wrong, formula", [
+    (gk.check_joseph_covariance, lambda: _joseph_variant("short"), "(I - K H) P (I - K H)^T + K R K^T"),
+    (gk.check_joseph_covariance, lambda: _joseph_variant("ksk"), "K R K^T, not K S K^T"),
+])
+def test_the_formula_is_in_the_instructors_feedback_only(check, wrong, formula):
+    """A student's own check names the kind of mistake; the formula that would hand the
+    exercise over is added only in the feedback an instructor returns."""
+    with pytest.raises(GradingError) as plain:
+        check(wrong())
+    assert formula not in str(plain.value)
+    with full_feedback(), pytest.raises(GradingError) as full:
+        check(wrong())
+    assert formula in str(full.value) and str(full.value).startswith(str(plain.value))
 
 
 def test_short_form_is_right_for_the_optimal_gain_only():
@@ -188,11 +204,11 @@ def _update_variant(kind):
 
 @pytest.mark.parametrize("kind, phrase", [
     ("unwrapped", r"bearing innovation is not wrapped.*straight to the left"),
-    ("reversed", r"innovation has the wrong sign.*z - z_hat"),
-    ("R-gain", r"gain uses R\^-1.*S = H P H\^T \+ R"),
+    ("reversed", r"innovation has the wrong sign.*which of the measured"),
+    ("R-gain", r"gain weighs with the measurement noise alone"),
     ("heading", r"'phi' is right modulo 2π but not wrapped.*turns the heading past \+pi"),
-    ("no-krk", r"P_new lacks \+ K R K\^T"),
-    ("plus", r"P_new = P \+ K S K\^T grows"),
+    ("no-krk", r"P_new lacks the measurement noise's term"),
+    ("plus", r"P_new grows with the update"),
     ("asymmetric", r"not symmetric at case"),
 ])
 def test_update_mistakes(kind, phrase):

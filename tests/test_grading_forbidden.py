@@ -18,7 +18,7 @@ from annslam_lib.grading import metrics as gm
 from annslam_lib.grading import observation as gobs
 from annslam_lib.grading import smoothing as gsm
 from annslam_lib.grading import verdict as gv
-from annslam_lib.models import motion, observation
+from annslam_lib.models import geometry, motion, observation
 from annslam_lib.models.vehicle import Vehicle
 from annslam_lib.perception import association
 from annslam_lib.slam import dense, kalman, localisation
@@ -45,8 +45,8 @@ CASES = [
      lambda P, H, R: dense.kalman_gain(P, H, R)[0], "slam.dense.kalman_gain"),
     (gkf.check_gate, "01a", "my_gate",
      lambda nu, S, p: kalman.innovation_gate(nu, S, p)[2], "slam.kalman.innovation_gate"),
-    (gkin.check_laser_pose, "02", "my_laser_pose",
-     lambda p, a, b: motion.laser_pose(p, _car(2.83, a, b))[0], "models.motion.laser_pose"),
+    (gkin.check_axle_pose, "02", "my_axle_pose",
+     lambda p, a, b: motion.axle_pose(p, _car(2.83, a, b))[0], "models.motion.axle_pose"),
     (gkin.check_laser_velocity, "02", "my_laser_velocity",
      lambda p, u, L, a, b: motion.laser_velocity(p, u, _car(L, a, b)), "models.motion.laser_velocity"),
     (gobs.check_observe, "03", "my_observe",
@@ -135,3 +135,15 @@ def test_the_inverse_map_through_the_library_is_refused_too():
         return world_to_tangent(S, -phi)
     with pytest.raises(GradingError, match="world_to_tangent: write it yourself"):
         gsm.check_tangent_to_world(my_tangent_to_world, quiet=True)
+
+
+@pytest.mark.parametrize("shortcut, target", [
+    (lambda p, a, b: motion.laser_pose(p, _car(2.83, -a, -b))[0], "models.motion.laser_pose"),
+    (lambda p, a, b: np.r_[geometry.from_frame(p, [-a, -b])[0], p[2]], "models.geometry.from_frame"),
+], ids=["laser_pose", "from_frame"])
+def test_the_axle_pose_through_the_forward_transform_is_refused_too(shortcut, target):
+    """P_l - R(phi)(a, b) is the forward transform with the lever arm negated: the library's
+    forward transform (motion.laser_pose, or the frame change it is) is refused as well."""
+    shortcut.__name__ = "my_axle_pose"
+    with pytest.raises(GradingError, match=rf"my_axle_pose calls annslam_lib\.{target}: write it yourself"):
+        gkin.check_axle_pose(shortcut, quiet=True)

@@ -10,6 +10,7 @@ from scipy.stats import chi2
 
 from annslam_lib.course.sandbox import Limits
 from annslam_lib.grading import GradingError
+from annslam_lib.grading.core import full_feedback
 from annslam_lib.grading import kalman as gk
 from solutions import ROOT, solution
 
@@ -19,7 +20,9 @@ NOTEBOOK = ROOT / "notebooks" / "01a_kalman_filter.ipynb"
 
 
 def quiet(check, fn, **kw):
-    return check(fn, quiet=True, **kw)
+    """The check, silent, with the messages of the instructor's returned feedback."""
+    with full_feedback():
+        return check(fn, quiet=True, **kw)
 
 
 def fails(check, fn, match):
@@ -102,7 +105,7 @@ def _update(K_of, var_of=lambda var, r, K: (1 - K) * var, raises=True):
     (_update(lambda v, r: r / (v + r)), "weight to the wrong side"),
     (lambda mu, v, z, r: (mu - v / (v + r) * (z - mu), v * r / (v + r)) if v + r > 0 and v >= 0
      and r >= 0 else (_ for _ in ()).throw(ValueError()), "away from the measurement"),
-    (_update(lambda v, r: v / (v + r), lambda v, r, K: K * v), "K·var"),
+    (_update(lambda v, r: v / (v + r), lambda v, r, K: K * v), "share of the prior's variance that the measurement REMOVES"),
     (_update(lambda v, r: v / (v + r), lambda v, r, K: v + r), "adds the variances"),
     (_update(lambda v, r: v / (v + r), lambda v, r, K: v), "prior's variance unchanged"),
     (_update(lambda v, r: math.sqrt(v) / (math.sqrt(v) + math.sqrt(r))), "standard deviations"),
@@ -125,7 +128,7 @@ def _p_minus(q, r):
 
 @pytest.mark.parametrize("fn, match", [
     (_p_minus, "PRIOR's stationary variance"),
-    (lambda q, r: 0.5 * (q - math.sqrt(q * q + 4 * q * r)) - q, "other root"),
+    (lambda q, r: 0.5 * (q - math.sqrt(q * q + 4 * q * r)) - q, "negative root"),
     (lambda q, r: _p_minus(r, q) - r, "q and r swapped"),
     (lambda q, r: math.sqrt(_p_minus(q, r) - q), "standard deviation"),
 ])
@@ -176,7 +179,7 @@ def _d2(nu, S):
 @pytest.mark.parametrize("fn, match", [
     (lambda nu, S, p: _d2(nu, S) <= chi2.ppf(p, 2), "always uses 2 degrees of freedom"),
     (lambda nu, S, p: _d2(nu, S) <= chi2.ppf(p, 1), "always uses 1 degree of freedom"),
-    (lambda nu, S, p: _d2(nu, S) <= chi2.ppf(1 - p, len(nu)), r"chi2.ppf\(1 − p, dof\)"),
+    (lambda nu, S, p: _d2(nu, S) <= chi2.ppf(1 - p, len(nu)), "quantile of 1 − p"),
     (lambda nu, S, p: math.sqrt(_d2(nu, S)) <= chi2.ppf(p, len(nu)), "distance √d2"),
     (lambda nu, S, p: nu @ S @ nu <= chi2.ppf(p, len(nu)), "νᵀ S ν"),
     (lambda nu, S, p: np.sum(nu**2 / np.diag(S)) <= chi2.ppf(p, len(nu)), "only the diagonal"),
@@ -224,3 +227,26 @@ def test_the_grader_scores_honest_and_mixed_submissions_of_the_chapter(tmp_path)
     assert "PRIOR's stationary variance" in msg["ex01a-steady-state-tests"]
     assert "right for every single measurement (m = 1)" in msg["ex01a-kalman-gain-tests"]
     assert "always uses 2 degrees of freedom" in msg["ex01a-gate-tests"]
+
+
+# ----------------------------------------------------------------------------- feedback levels
+
+def _weights_swapped(mu, var, z, r):
+    if var < 0 or r < 0 or var + r == 0:
+        raise ValueError("impossible variances")
+    K = r / (var + r)
+    return mu + K * (z - mu), (1 - K) * var
+
+
+def test_the_weights_swapped_message_teaches_without_handing_over_the_gain():
+    """A student's own check names the mistake and where to look, never the formula; the
+    instructor's returned feedback (full_feedback) adds it."""
+    with pytest.raises(GradingError) as student:
+        gk.check_update_1d(_weights_swapped, quiet=True)
+    msg = str(student.value)
+    assert "weight to the wrong side" in msg
+    assert "var / (var + r)" not in msg and "r / (var + r)" not in msg
+    with pytest.raises(GradingError) as instructor, full_feedback():
+        gk.check_update_1d(_weights_swapped, quiet=True)
+    full = str(instructor.value)
+    assert full.startswith(msg) and "var / (var + r)" in full

@@ -8,6 +8,7 @@ import pytest
 
 from annslam_lib import paper
 from annslam_lib.grading import NOT_WRITTEN, GradingError
+from annslam_lib.grading.core import full_feedback
 from annslam_lib.grading import kinematics as gk
 from annslam_lib.models.vehicle import Vehicle
 from annslam_lib.models import motion
@@ -19,8 +20,9 @@ def car(L=2.83, a=3.78, b=0.5, H=0.76):
 
 
 def fails(check, fn, *phrases, **kwargs):
-    """The check must fail, with every phrase (regex) in its message; returns the message."""
-    with pytest.raises(GradingError) as err:
+    """The check must fail, with every phrase (regex) in its message as the instructor's
+    returned feedback has it (with the answer part); returns that message."""
+    with pytest.raises(GradingError) as err, full_feedback():
         check(fn, **kwargs)
     msg = str(err.value)
     for p in phrases:
@@ -33,14 +35,14 @@ def fails(check, fn, *phrases, **kwargs):
 my_axle_speed = solution("01", "my_axle_speed")
 my_euler_step = solution("01", "my_euler_step")
 my_process_jacobians = solution("01", "my_process_jacobians")
-my_laser_pose = solution("02", "my_laser_pose")
+my_axle_pose = solution("02", "my_axle_pose")
 my_laser_velocity = solution("02", "my_laser_velocity")
 my_laser_pose_jacobian = solution("02", "my_laser_pose_jacobian")
 
 
 SOLUTIONS = [(gk.check_axle_speed, my_axle_speed), (gk.check_euler_step, my_euler_step),
              (gk.check_process_jacobians, my_process_jacobians),
-             (gk.check_laser_pose, my_laser_pose), (gk.check_laser_velocity, my_laser_velocity),
+             (gk.check_axle_pose, my_axle_pose), (gk.check_laser_velocity, my_laser_velocity),
              (gk.check_laser_pose_jacobian, my_laser_pose_jacobian)]
 
 
@@ -62,6 +64,10 @@ def lib_laser_pose(p, a, b):
     return motion.laser_pose(p, car(a=a, b=b))[0]
 
 
+def lib_axle_pose(p, a, b):
+    return motion.axle_pose(p, car(a=a, b=b))[0]
+
+
 def lib_velocity(pose, control, L, a, b):
     return motion.laser_velocity(pose, control, car(L, a, b))
 
@@ -71,7 +77,7 @@ def lib_jac(p, a, b):
 
 
 LIBRARY = [(gk.check_axle_speed, lib_axle_speed), (gk.check_euler_step, lib_step),
-           (gk.check_process_jacobians, lib_fg), (gk.check_laser_pose, lib_laser_pose),
+           (gk.check_process_jacobians, lib_fg), (gk.check_axle_pose, lib_axle_pose),
            (gk.check_laser_velocity, lib_velocity), (gk.check_laser_pose_jacobian, lib_jac)]
 
 
@@ -109,7 +115,8 @@ def test_printed_discrete_model_fails_the_euler_step_naming_its_errata(inside, r
         return paper.discrete_model_printed(pose, u, dt, car(L, a, b), tan_inside=inside)
     fails(gk.check_euler_step, printed, "printed discrete model", "section 4.1",
           f"tan\\(alpha\\) read {reading}", "4.1-discrete-x", "4.1-discrete-phi",
-          "INSIDE cos", r"\+b sin\(phi\) for -b sin\(phi\)", "without phi\\(k-1\\) \\+ dt")
+          "INSIDE cos", r"sign of the y row's b sin\(phi\) term", "yaw rate alone",
+          r"Correct step: pose \+ dt")
 
 
 @pytest.mark.parametrize("inside", [False, True])
@@ -144,8 +151,8 @@ def test_printed_full_state_fails_naming_both_rows():
     def printed(pose, u, L, a, b):
         return paper.full_state_printed(pose, u, car(L, a, b))
     msg = fails(gk.check_laser_velocity, printed, "printed 'full state'", "section 4.1",
-                r"x row has a cos\(phi\) where a sin\(phi\) belongs", "4.1-full-x",
-                "y row subtracts the lever-arm term", "4.1-full-y", "heading row .* is right")
+                r"x row's lever-arm term has the wrong function of phi", "4.1-full-x",
+                "y row's lever-arm term has the wrong sign", "4.1-full-y", "heading row is right")
     assert "x_dot = v cos(phi) - v/L tan(alpha) (a sin(phi) + b cos(phi))" in msg
 
     def euler_printed(pose, u, dt, L, a, b):
@@ -166,20 +173,23 @@ def test_a_single_printed_row_is_named(row, other):
     assert f"4.1-full-{'xy'[other]}" not in msg
 
 
-def test_printed_scalar_laser_position_is_confirmed_and_passes():
-    def printed_scalar(axle_pose, a, b):
-        return np.r_[paper.laser_position_printed(axle_pose, car(a=a, b=b)), axle_pose[2]]
-    assert gk.check_laser_pose(printed_scalar, seed=3, n=100).startswith("✓ printed_scalar")
+def test_printed_scalar_laser_position_solved_for_the_axle_passes():
+    """The paper's scalar form is correct: the lever arm it adds, taken off again, is the
+    inverse (it depends on the heading only, which the laser pose holds)."""
+    def printed_scalar(laser_pose, a, b):
+        lever = paper.laser_position_printed(laser_pose, car(a=a, b=b)) - laser_pose[:2]
+        return np.r_[laser_pose[:2] - lever, laser_pose[2]]
+    assert gk.check_axle_pose(printed_scalar, seed=3, n=100).startswith("✓ printed_scalar")
 
 
 @pytest.mark.parametrize("form,how", [
-    (lambda p, a, b: np.r_[p[:2] + (a + b) * np.r_[np.cos(p[2]), np.sin(p[2])], p[2]],
-     "b T\\(phi\\) puts the b offset along the heading"),
-    (lambda p, a, b: np.r_[p[:2] + (a + b) * np.r_[np.cos(p[2]), np.sin(p[2])] + np.pi / 2, p[2]],
+    (lambda p, a, b: np.r_[p[:2] - (a + b) * np.r_[np.cos(p[2]), np.sin(p[2])], p[2]],
+     "the b offset points along the heading"),
+    (lambda p, a, b: np.r_[p[:2] - (a + b) * np.r_[np.cos(p[2]), np.sin(p[2])] - np.pi / 2, p[2]],
      "pi/2 added to both coordinates")])
 def test_printed_vector_form_read_literally_fails(form, how):
-    fails(gk.check_laser_pose, form, "VECTOR form", "4.1-Pl-vector", how, "belongs inside T",
-          "scalar form printed right after it is correct")
+    fails(gk.check_axle_pose, form, "VECTOR form", "4.1-Pl-vector", how, "belongs inside T",
+          "scalar form printed right after it is correct", r"x_c = x_l - a cos\(phi\) \+ b sin")
 
 
 def test_printed_vector_form_jacobian_fails():
@@ -203,11 +213,11 @@ def test_printed_speed_translation():
 # ---------------------------------------------------- (c) typical mistakes
 
 @pytest.mark.parametrize("wrong,phrase", [
-    (lambda v, al, H, L: v * (1 - np.tan(al) * H / L), "multiplies .* the inverse"),
-    (lambda v, al, H, L: v / (1 + np.tan(al) * H / L), "sign of the H term is reversed"),
+    (lambda v, al, H, L: v * (1 - np.tan(al) * H / L), "v_e from v_c.*the inverse"),
+    (lambda v, al, H, L: v / (1 + np.tan(al) * H / L), "sign of the H term reversed"),
     (lambda v, al, H, L: v * (1 + np.tan(al) * H / L), "first-order approximation"),
     (lambda v, al, H, L: v / (1 - np.tan(al) * L / H), "uses L/H where H/L belongs"),
-    (lambda v, al, H, L: v / (1 - np.sin(al) * H / L), r"sin\(alpha\) where tan\(alpha\)"),
+    (lambda v, al, H, L: v / (1 - np.sin(al) * H / L), r"sin\(alpha\) where another function of alpha"),
     (lambda v, al, H, L: v / (1 - np.tan(np.degrees(al)) * H / L), "disagrees with the reference"),
 ])
 def test_axle_speed_mistakes(wrong, phrase):
@@ -274,18 +284,51 @@ def test_process_jacobian_mistakes():
           r"returned shape \(2, 3\) .* expected shape \(3, 3\)")
 
 
+def _rot(f, a, b):
+    """R(f) (a, b), written out independently of the check's own helpers."""
+    return np.r_[a * np.cos(f) - b * np.sin(f), a * np.sin(f) + b * np.cos(f)]
+
+
 @pytest.mark.parametrize("wrong,phrase", [
-    (lambda p, a, b: np.r_[p[0] - a * np.cos(p[2]) + b * np.sin(p[2]),
-                           p[1] - a * np.sin(p[2]) - b * np.cos(p[2]), p[2]], "subtracts the lever arm"),
-    (lambda p, a, b: np.r_[p[0] + a * np.cos(p[2]) + b * np.sin(p[2]),
-                           p[1] - a * np.sin(p[2]) + b * np.cos(p[2]), p[2]], "by -phi"),
-    (lambda p, a, b: lib_laser_pose(p, b, a), "swaps a and b"),
-    (lambda p, a, b: lib_laser_pose(p, a, -b), "to the RIGHT"),
-    (lambda p, a, b: lib_laser_pose(p, a, b)[:2], r"returned shape \(2,\)"),
-    (lambda p, a, b: np.r_[lib_laser_pose(p, a, b)[:2], p[2] + np.pi / 2], r"constant \+90.0°"),
+    (lambda p, a, b: np.r_[p[:2] + _rot(p[2], a, b), p[2]], "adds the lever arm.*forward transform"),
+    (lambda p, a, b: lib_laser_pose(p, a, b), "adds the lever arm.*forward transform"),
+    (lambda p, a, b: np.r_[p[:2] - _rot(-p[2], a, b), p[2]], r"by -phi \(the transposed rotation"),
+    (lambda p, a, b: np.r_[_rot(-p[2], *p[:2]) - np.r_[a, b], p[2]],
+     "rotates the laser's position itself"),
+    (lambda p, a, b: lib_axle_pose(p, b, a), "swaps a and b"),
+    (lambda p, a, b: lib_axle_pose(p, a, -b), "to the RIGHT"),
+    (lambda p, a, b: lib_axle_pose(p, a, 0.0), "only the forward offset a"),
+    (lambda p, a, b: lib_axle_pose(p, a, b)[:2], r"returned shape \(2,\)"),
+    (lambda p, a, b: np.r_[lib_axle_pose(p, a, b)[:2], p[2] + np.pi / 2], r"constant \+90.0°"),
 ])
-def test_laser_pose_mistakes(wrong, phrase):
-    fails(gk.check_laser_pose, wrong, phrase)
+def test_axle_pose_mistakes(wrong, phrase):
+    msg = fails(gk.check_axle_pose, wrong, phrase)
+    if "shape" not in phrase and "90" not in phrase:   # a named mistake: the answer is the inverse
+        assert "P_c = P_l - R(phi) (a, b)" in msg
+
+
+def test_every_axle_pose_mistake_is_recognised_and_keeps_its_answer_out_of_the_message():
+    """Each Mistake of the check, handed in as an answer, is named by its own message (and no
+    other's): the student sees the kind of slip, the instructor also the formula."""
+    for m in gk._AXLE_MISTAKES:
+        def wrong(p, a, b, m=m):
+            return m.wrong(p, a, b)
+        wrong.__name__ = "my_axle_pose"
+        with pytest.raises(GradingError) as err:
+            gk.check_axle_pose(wrong, quiet=True)
+        assert str(err.value) == m.message.replace("{name}", "my_axle_pose")
+        assert m.answer and m.answer not in str(err.value)
+        with pytest.raises(GradingError) as err, full_feedback():
+            gk.check_axle_pose(wrong, quiet=True)
+        assert m.answer in str(err.value)
+
+
+def test_laser_pose_of_the_library_and_the_axle_pose_solution_are_inverses():
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        p = np.r_[rng.uniform(-30, 30, 2), rng.uniform(-np.pi, np.pi)]
+        a, b = rng.uniform(-2, 5), rng.uniform(-1.5, 1.5)
+        np.testing.assert_allclose(my_axle_pose(lib_laser_pose(p, a, b), a, b), p, atol=1e-12)
 
 
 def test_laser_velocity_mistakes():
@@ -328,9 +371,29 @@ def test_laser_pose_jacobian_sign_slip_names_the_entry():
 def test_the_stub_is_not_written_yet(check):
     name = {gk.check_axle_speed: "my_axle_speed", gk.check_euler_step: "my_euler_step",
             gk.check_process_jacobians: "my_process_jacobians",
-            gk.check_laser_pose: "my_laser_pose", gk.check_laser_velocity: "my_laser_velocity",
+            gk.check_axle_pose: "my_axle_pose", gk.check_laser_velocity: "my_laser_velocity",
             gk.check_laser_pose_jacobian: "my_laser_pose_jacobian"}[check]
     ns = {}
     exec(f"def {name}(*args):\n    # YOUR CODE HERE\n    raise NotImplementedError()", ns)
     msg = fails(check, ns[name], f"^{name} {NOT_WRITTEN}", "raise NotImplementedError")
     assert "\n" not in msg
+
+
+# ---------------------------------------------------- feedback without the answer
+
+@pytest.mark.parametrize("mistakes", [gk._SPEED_MISTAKES, gk._STEP_MISTAKES, gk._F_MISTAKES,
+                                      gk._G_MISTAKES, gk._AXLE_MISTAKES, gk._RATE_MISTAKES,
+                                      gk._JAC_MISTAKES], ids=lambda m: f"{len(m)} mistakes")
+def test_a_students_message_never_holds_its_answer(mistakes):
+    for m in mistakes:
+        if m.answer:
+            assert m.answer not in m.message
+
+
+def test_the_unchanged_encoder_speed_names_the_erratum_but_not_the_formula():
+    with pytest.raises(GradingError) as err:
+        gk.check_axle_speed(lambda v_e, alpha, H, L: v_e, quiet=True)
+    assert "4.1-speed" in str(err.value) and "1 - tan(alpha) H/L" not in str(err.value)
+    with pytest.raises(GradingError) as err, full_feedback():
+        gk.check_axle_speed(lambda v_e, alpha, H, L: v_e, quiet=True)
+    assert "v_c = v_e / (1 - tan(alpha) H/L)" in str(err.value)

@@ -62,8 +62,8 @@ def test_beacon_update_honest_answers_pass(fn, seed):
     (_update(H_of=lambda Hp, Hm: np.column_stack([Hm, np.zeros(2)])), "Jacobian with respect to the LANDMARK"),
     (_update(wrap_nu=False), "does not wrap the bearing innovation"),
     (_update(wrap_heading=False), "heading unwrapped"),
-    (_update(sign=-1.0), "ẑ − z as the innovation"),
-    (_update(with_R=False), "leaves R out"),
+    (_update(sign=-1.0), "innovation's sign reversed"),
+    (_update(with_R=False), "leaves the laser's noise out"),
 ])
 def test_beacon_update_typical_mistakes_are_named(fn, match):
     fails(gl.check_beacon_update, fn, match)
@@ -95,7 +95,7 @@ def test_nis_verdict_honest_answers_pass(fn, seed):
 
 @pytest.mark.parametrize("fn, match", [
     (_verdict(lambda p: 1e-300, lambda p: p), "checks only the upper side"),
-    (_verdict(lambda p: 1 - p, lambda p: p), r"chi2.ppf\(1 − p, D\) and chi2.ppf\(p, D\)"),
+    (_verdict(lambda p: 1 - p, lambda p: p), r"band holds 2p − 1 of the averages"),
     (_verdict(lambda p: (1 - p) / 2, lambda p: (1 + p) / 2, D_of=lambda nis, dof: float(np.mean(dof))),
      "band of a SINGLE update"),
     (_verdict(lambda p: (1 - p) / 2, lambda p: (1 + p) / 2, D_of=lambda nis, dof: float(len(nis))),
@@ -119,6 +119,14 @@ def test_nis_verdict_partial_right_only_when_every_update_has_two_dof():
     nis = np.random.default_rng(1).chisquare(dof)
     assert fn(nis, dof, 0.95) == gl.localisation.nis_verdict(nis, dof, 0.95)[0]
     fails(gl.check_nis_verdict, fn, r"returned '.*', expected '.*': the average NIS per dof is")
+
+
+def test_the_band_is_in_the_instructors_feedback_only():
+    from grading_support import both_feedbacks
+
+    plain, full = both_feedbacks(gl.check_nis_verdict, _verdict(lambda p: 1 - p, lambda p: p))
+    assert "chi2.ppf((1 − p)/2, D)" not in plain
+    assert "chi2.ppf((1 − p)/2, D)" in full
 
 
 # ----------------------------------------------------------------------------- the grader

@@ -7,6 +7,7 @@ import pytest
 
 
 from annslam_lib.grading import NOT_WRITTEN, GradingError
+from annslam_lib.grading.core import full_feedback
 from annslam_lib.grading import metrics as gm
 from annslam_lib.data.records import Gps
 from annslam_lib.evaluation.trajectory import gps_outliers
@@ -195,3 +196,14 @@ def test_gps_outliers_accept_0_1_and_refuse_changed_inputs():
 def test_stub_is_not_written_yet(check):
     with pytest.raises(GradingError, match=NOT_WRITTEN):
         check(stub)
+
+
+def test_the_remedy_is_in_the_instructors_feedback_only():
+    """A student's check names the kind of mistake; the instructor's feedback adds the fix."""
+    fix = "traj[0, 0] <= t <= traj[-1, 0]"
+    with pytest.raises(GradingError) as plain:
+        gm.check_track_rmse(_rmse_variant("clamped"))
+    assert fix not in str(plain.value)
+    with full_feedback(), pytest.raises(GradingError) as full:
+        gm.check_track_rmse(_rmse_variant("clamped"))
+    assert fix in str(full.value)

@@ -8,14 +8,16 @@ import pytest
 
 from annslam_lib import paper
 from annslam_lib.grading import GradingError
+from annslam_lib.grading.core import full_feedback
 from annslam_lib.grading import observation as gk
 from annslam_lib.models import observation
 from solutions import solution
 
 
 def quiet(check, fn, **kw):
-    """Run a check without printing; warnings from wrong forms (dx = 0) silenced."""
-    with warnings.catch_warnings():
+    """Run a check without printing; warnings from wrong forms (dx = 0) silenced; the
+    messages as the instructor's returned feedback has them (with the answer part)."""
+    with warnings.catch_warnings(), full_feedback():
         warnings.simplefilter("ignore", RuntimeWarning)
         return check(fn, quiet=True, **kw)
 
@@ -116,7 +118,7 @@ def test_unwrapped_bearing_gets_the_wrap_message():
     (lambda dx, dy, phi: np.arctan2(-dy, -dx) - phi + np.pi / 2, "from the landmark to the laser"),
     (lambda dx, dy, phi: np.arctan2(dy, dx) + phi + np.pi / 2, "adds the heading"),
     (lambda dx, dy, phi: np.arctan2(dx, dy) - phi + np.pi / 2, "swaps the arguments of np.arctan2"),
-    (lambda dx, dy, phi: np.arctan(dy / dx) - phi, r"AND leaves out the \+π/2"),
+    (lambda dx, dy, phi: np.arctan(dy / dx) - phi, "AND leaves out the laser's bearing"),
 ])
 def test_typical_bearing_mistakes(f, phrase):
     with pytest.raises(GradingError, match=phrase):
@@ -138,17 +140,17 @@ def test_printed_jacobian_fails_naming_the_misprinted_entries():
               lambda p, m: paper.observation_jacobian_printed(p, m, alignment=0))
     msg = str(e.value)
     assert "section 4.2" in msg and "in the x_i column" in msg
-    assert "d range / d x_i (printed −Δy/Δ, must be −Δx/Δ)" in msg
-    assert "d range / d y_i (printed 0, must be −Δy/Δ)" in msg
-    assert "d bearing / d y_i (printed Δy/Δ²" in msg and "must be −Δx/Δ²" in msg
+    assert "d range / d x_i must be −Δx/Δ (printed −Δy/Δ)" in msg
+    assert "d range / d y_i must be −Δy/Δ (printed 0)" in msg
+    assert "d bearing / d y_i must be −Δx/Δ² (printed Δy/Δ²)" in msg
     assert "4.2-jac-range" in msg and "4.2-jac-bearing" in msg
     with pytest.raises(GradingError) as e:
         quiet(gk.check_observation_jacobian,
               lambda p, m: paper.observation_jacobian_printed(p, m, alignment=1))
     msg = str(e.value)
-    assert "in the y_i column" in msg and "d range / d x_i (printed 0, must be −Δx/Δ)" in msg
+    assert "in the y_i column" in msg and "d range / d x_i must be −Δx/Δ (printed 0)" in msg
     assert "d range / d y_i" not in msg          # right in this reading
-    assert "d bearing / d y_i (printed Δy/Δ²" in msg
+    assert "d bearing / d y_i must be −Δx/Δ² (printed Δy/Δ²)" in msg
 
 
 def test_printed_jacobian_entries_are_really_the_wrong_ones():
@@ -217,7 +219,7 @@ def inverse_variant(angle, trig=(np.cos, np.sin), offset=True):
     (inverse_variant(lambda ph, b: ph - b + np.pi / 2), "mirrors the bearing"),
     (inverse_variant(lambda ph, b: ph + b - np.pi / 2, (np.sin, np.cos)), "swaps cos and sin"),
     (inverse_variant(lambda ph, b: ph + b - np.pi / 2, offset=False), "relative to the laser"),
-    (inverse_variant(lambda ph, b: b - np.pi / 2), "rotate it by the heading"),
+    (inverse_variant(lambda ph, b: b - np.pi / 2), "not yet turned into the world's axes"),
 ])
 def test_inverse_mistakes(fn, phrase):
     with pytest.raises(GradingError, match=phrase):

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from annslam_lib.grading import GradingError
+from annslam_lib.grading.core import full_feedback
 from annslam_lib.grading import smoothing as gsm
 from annslam_lib.models.observation import observe
 from solutions import solution
@@ -146,3 +147,13 @@ def test_tangent_to_world_mistakes_are_named():
         out[:2, :2] = R @ out[:2, :2] @ R.T
         return out
     fails(gsm.check_tangent_to_world, block, "position block")
+
+
+def test_the_formula_is_in_the_instructors_feedback_only():
+    """Exercise 10.3 derives B: a student's check does not print it, an instructor's does."""
+    with pytest.raises(GradingError) as plain:
+        gsm.check_tangent_to_world(lambda S, phi: np.asarray(S), quiet=True)
+    assert "blockdiag" not in str(plain.value)
+    with full_feedback(), pytest.raises(GradingError) as full:
+        gsm.check_tangent_to_world(lambda S, phi: np.asarray(S), quiet=True)
+    assert "B = blockdiag(R(φ), 1)" in str(full.value)

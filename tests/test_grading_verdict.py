@@ -11,6 +11,7 @@ import pytest
 
 from annslam_lib import paper
 from annslam_lib.grading import GradingError
+from annslam_lib.grading.core import full_feedback
 from annslam_lib.grading import verdict as gv
 from annslam_lib.evaluation import map as map_eval
 from solutions import solution
@@ -99,12 +100,41 @@ def test_aligned_rmse_solution_passes():
 
 
 @pytest.mark.parametrize("kind, phrase", [
-    ("absolute", "WITHOUT the alignment"), ("centroid", "only shifts the centroids"),
+    ("absolute", "WITHOUT the alignment"), ("centroid", "only removes the translation"),
     ("mean", "MEAN distance"), ("coords", "2K coordinates"), ("mse", "square root"),
-    ("transposed", "applies R transposed"), ("reflection", "mirror"), ("scale", "scale the map")])
+    ("transposed", "rotates with R transposed"), ("reflection", "mirror"), ("scale", "scale the map")])
 def test_aligned_rmse_mistakes(kind, phrase):
     with pytest.raises(GradingError, match=phrase):
         gv.check_aligned_rmse(gv._wrong_rmse(kind))
+
+
+@pytest.mark.parametrize("check, wrong, formula", [
+    (gv.check_aligned_rmse, gv._wrong_rmse("absolute"), "2 (s_1 + d s_2)"),
+    (gv.check_aligned_rmse, gv._wrong_rmse("reflection"), "not 2 (s_1 + s_2)"),
+    (gv.check_regression, gv._wrong_reg("swapped"), "slope = S_go / S_gg"),
+    (gv.check_rigid_align, gv._wrong_rt("transposed"), "R = V diag(1, d) U^T"),
+])
+def test_the_formula_is_in_the_instructors_feedback_only(check, wrong, formula):
+    """Exercises 8.2 and 8.3 derive their formulas: a student's check names the kind of
+    mistake, the instructor's returned feedback adds what would hand the exercise over."""
+    with pytest.raises(GradingError) as plain:
+        check(wrong, quiet=True)
+    assert formula not in str(plain.value)
+    with full_feedback(), pytest.raises(GradingError) as full:
+        check(wrong, quiet=True)
+    assert formula in str(full.value)
+
+
+def test_the_aligned_rmse_is_derived_not_aligned():
+    """Exercise 8.2's solution forms no rotation: the check forbids rigid_align."""
+    from annslam_lib.grading import core
+
+    assert "annslam_lib.evaluation.map:rigid_align" in gv.check_aligned_rmse.__annslam_forbids__
+    token = core._ALLOWED.set(False)
+    try:
+        gv.check_aligned_rmse(notebook_aligned_rmse, quiet=True)
+    finally:
+        core._ALLOWED.reset(token)
 
 
 def test_aligned_rmse_must_reject_a_single_pair_and_stub():

@@ -94,6 +94,31 @@ def test_laser_and_axle_pose_jacobians(x, y, phi, veh):
     np.testing.assert_allclose(J @ K, np.eye(3), atol=1e-12)
 
 
+def test_axle_pose_inverts_laser_pose_and_puts_the_laser_at_a_b_in_the_car_frame():
+    """Notebook 02, exercise 2.1's reference: a round trip both ways, and an independent
+    check through the frame change (the laser, seen from the returned axle pose, sits at
+    (a, b)), batched over cars' offsets and headings near +-pi."""
+    rng = np.random.default_rng(21)
+    n = 500
+    poses = np.c_[rng.uniform(-100, 100, (n, 2)), rng.uniform(-np.pi, np.pi, n)]
+    poses[:4, 2] = [np.pi, -np.pi + 1e-12, 0.0, np.pi / 2]
+    for veh in (V, Vehicle(L=2.0, H=0.5, a=-1.3, b=-0.8), Vehicle(L=2.0, H=0.5, a=0.0, b=1.0)):
+        axle, K = motion.axle_pose(poses, veh)
+        assert axle.shape == poses.shape and K.shape == (n, 3, 3)
+        np.testing.assert_array_equal(axle[:, 2], poses[:, 2])          # heading shared
+        local = geometry.to_frame(axle, poses[:, :2])[0]
+        np.testing.assert_allclose(local, np.broadcast_to([veh.a, veh.b], (n, 2)), atol=1e-11)
+        np.testing.assert_allclose(motion.laser_pose(axle, veh)[0], poses, atol=1e-11)
+        np.testing.assert_allclose(motion.axle_pose(motion.laser_pose(poses, veh)[0], veh)[0],
+                                   poses, atol=1e-11)
+        K_fd = numerical_jacobian(lambda q: motion.axle_pose(q, veh)[0], poses[7],
+                                  angle_outputs=[2])
+        assert_jac(K[7], K_fd, 200)
+    # one pose by hand: laser at the origin heading +y; C is a behind (-y) and b to the right (+x)
+    np.testing.assert_allclose(motion.axle_pose([0.0, 0.0, np.pi / 2], V)[0],
+                               [V.b, -V.a, np.pi / 2], atol=1e-15)
+
+
 @HYP
 @given(x=coord, y=coord, phi=heading, v=speed, alpha=steer, dt=dt_s, veh=vehicles)
 def test_predict_jacobians(x, y, phi, v, alpha, dt, veh):

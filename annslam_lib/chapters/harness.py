@@ -68,11 +68,18 @@ class Track:
     x: np.ndarray | None = None
     P: np.ndarray | None = None
 
-    def record(self, t: float, x, P) -> None:
+    nis: list = field(default_factory=list)
+    nis_dof: list = field(default_factory=list)
+
+    def record(self, t: float, x, P, nis: float | None = None, dof: int = 0) -> None:
+        """The estimate after the scan at time t; ``nis``: that scan's NIS and ``dof`` its
+        degrees of freedom (2 per detection in the update), if the loop computes them."""
         x, P = np.asarray(x, dtype=float), np.asarray(P, dtype=float)
         self.t.append(float(t))
         self.pose.append(x[:3].copy())
         self.pose_cov.append(P[:3, :3].copy())
+        self.nis.append(math.nan if nis is None else float(nis))
+        self.nis_dof.append(int(dof) if nis is not None else 0)
         self.x, self.P = x, P
 
     def result(self) -> dict:
@@ -80,7 +87,9 @@ class Track:
         P = np.zeros((3, 3)) if self.P is None else self.P
         return {"t": np.asarray(self.t, dtype=float), "pose": np.asarray(self.pose).reshape(-1, 3),
                 "pose_cov": np.asarray(self.pose_cov).reshape(-1, 3, 3),
-                "landmarks": x[3:].reshape(-1, 2).copy(), "landmark_cov": P[3:, 3:].copy()}
+                "landmarks": x[3:].reshape(-1, 2).copy(), "landmark_cov": P[3:, 3:].copy(),
+                "nis": np.asarray(self.nis, dtype=float),
+                "nis_dof": np.asarray(self.nis_dof, dtype=int)}
 
 
 def dataset_of(run: str):

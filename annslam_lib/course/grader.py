@@ -57,7 +57,8 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from ..grading.core import GradingError, forbidden, forbidden_message
+from ..grading.core import (GradingError, forbidden, forbidden_message, full_feedback,
+                            grading_student)
 from . import codec
 from .integrity import Guard, course_folders, inert, prepare_grader
 from .plan import (CODE_STUB, GradePlan, PlannedCell, _defined_names, _meta, _read_notebook,
@@ -556,7 +557,7 @@ def grade_submission(path, instructor, *, limits: Limits = Limits(), isolation: 
     g.solution_sources = _solution_sources(gplan, tests, solutions)
     tampered: list[str] = []
     try:
-        with Sandbox(limits, isolation=isolation, hide=hide) as sb:
+        with Sandbox(limits, isolation=isolation, hide=hide, user=student) as sb:
             g.isolation = sb.isolation
             session = _Session(sb, gplan)
             try:
@@ -571,7 +572,10 @@ def grade_submission(path, instructor, *, limits: Limits = Limits(), isolation: 
                     g.errors.append(f"cell {c.index}: {res.reason()}")
             for cell in tests:
                 try:
-                    g.exercises.append(_exercise(session, cell, solutions))
+                    # the instructor's returned feedback, in full; a draw per student is
+                    # the submission's student's (the demo draw outside nbgrader's layout)
+                    with full_feedback(), grading_student(student or "demo"):
+                        g.exercises.append(_exercise(session, cell, solutions))
                 except _KernelGone as e:
                     g.exercises.append(ExerciseResult(cell.grade_id, 0.0, cell.points,
                                                       "kernel died", str(e)))

@@ -47,6 +47,7 @@ import functools
 import json
 import os
 import queue
+import re
 import shutil
 import signal
 import subprocess
@@ -464,9 +465,12 @@ class Sandbox:
     checkout (the instructor's notebooks, other submissions, the gradebook)."""
 
     def __init__(self, limits: Limits = Limits(), *, isolation: str = "auto",
-                 hide=()) -> None:
+                 hide=(), user: str | None = None) -> None:
         if isolation not in ISOLATIONS:
             raise ValueError(f"isolation must be one of {ISOLATIONS}, got {isolation!r}")
+        # the hub user the notebook ran as (a lab drawn per student draws the same in the
+        # replay); the score never depends on it: checks read the grader's own record
+        self.user = user if user and re.fullmatch(r"[A-Za-z0-9_.@+-]{1,64}", user) else None
         if isolation in ("auto", "bwrap"):
             if not bwrap_available():
                 raise GradingEnvironmentError(f"the grading sandbox cannot be made here: "
@@ -543,6 +547,8 @@ class Sandbox:
         if "ANNSLAM_DATA_URL" in os.environ:
             env["ANNSLAM_DATA_URL"] = os.environ["ANNSLAM_DATA_URL"]
         from ..data import fetch                  # the kernel reads the data where we do
+        if self.user:
+            env["JUPYTERHUB_USER"] = self.user
         env.update(ANNSLAM_DATA=str(fetch.data_dir()), HOME=str(self.home),
                    PYTHONPATH=str(self.lib), MPLCONFIGDIR=str(self.home / ".mpl"),
                    IPYTHONDIR=str(self.home / ".ipython"),

@@ -29,7 +29,7 @@ from ..ann.network import train_loop as reference_train_loop
 from .core import allowing_library_calls, forbids, Passed, GradingError, Mistake, call, check_function, fmt
 
 __all__ = ["reference_forward", "check_forward", "mapminmax", "mapminmax_reverse",
-           "check_mapminmax", "toy_problem", "reference_train_loop", "LOOP_MISTAKES",
+           "check_mapminmax", "toy_problem", "reference_train_loop", "LOOP_MISTAKES", "LOOP_ANSWERS",
            "run_loop", "check_train_loop"]
 
 _ERRATUM = next(e for e in paper.ERRATA if e.key == "4.2-ann")
@@ -115,34 +115,37 @@ _ERRATUM_TEXT = (f"(paper section {_ERRATUM.section}, erratum {_ERRATUM.key!r} i
 def _forward_mistakes(cases: list[dict]) -> list[Mistake]:
     lut = {c["label"]: c for c in cases}
 
-    def m(message, **kw):
-        return Mistake(message, lambda label, kw=kw: _variant(lut[label], **kw))
+    def m(message, answer="", **kw):
+        return Mistake(message, lambda label, kw=kw: _variant(lut[label], **kw), answer)
 
     return [
         m("your hidden layer is the paper's printed neuron sign(b + Σ w_i x_i) " + _ERRATUM_TEXT
           + ". A sign unit outputs only -1, 0 or +1 and its derivative is zero everywhere, so "
-          "back-propagation cannot train it (section 1). nntool's fitnet uses tansig = tanh: "
+          "back-propagation cannot train it (section 1). fitnet's hidden transfer function is "
+          "named in section 1.", "nntool's fitnet uses tansig = tanh: "
           "h = np.tanh(x~ @ W1.T + b1).", hidden=_sign_right),
         m("your hidden layer is the paper's printed left-hand side sign(<w, x>) + b " + _ERRATUM_TEXT
           + ", which is not even the same function as the printed right-hand side (b outside "
-          "the sign). Neither can be trained by back-propagation (zero gradient). Use tansig = "
-          "tanh: h = np.tanh(x~ @ W1.T + b1).", hidden=_sign_left),
-        m("your hidden layer uses the logistic sigmoid 1 / (1 + exp(-s)) (MATLAB's logsig); "
+          "the sign). Neither can be trained by back-propagation (zero gradient); fitnet's "
+          "hidden transfer function is named in section 1.",
+          "Use tansig = tanh: h = np.tanh(x~ @ W1.T + b1).", hidden=_sign_left),
+        m("your hidden layer uses the logistic sigmoid 1 / (1 + exp(-s)) (MATLAB's logsig), "
+          "not fitnet's hidden transfer function (section 1).",
           "fitnet's hidden layer is tansig, i.e. np.tanh.", hidden=_logsig),
-        m("your output layer applies tanh too; fitnet's output layer is linear (purelin): "
-          "y~ = W2 h + b2, so that it can output any correction.", out=np.tanh),
+        m("your output layer applies tanh too; fitnet's output layer is linear (purelin), so "
+          "that it can output any correction.", "y~ = W2 h + b2.", out=np.tanh),
         m("you fed the raw inputs to the network: normalise them first with the training "
-          "statistics, x~ = (X - x_mean) / x_std.", norm="none"),
-        m("you multiplied by x_std when normalising; divide: x~ = (X - x_mean) / x_std.",
-          norm="times"),
-        m("you returned the network's normalised output y~; undo the output normalisation: "
-          "y = y~ * y_std + y_mean (metres).", denorm="none"),
-        m("you normalised the output again instead of undoing it: y = y~ * y_std + y_mean, "
-          "not (y~ - y_mean) / y_std.", denorm="inverse"),
-        m("you forgot y_mean when undoing the output normalisation: y = y~ * y_std + y_mean.",
-          denorm="no_mean"),
-        m("the hidden layer's bias b1 is missing: h = tanh(x~ @ W1.T + b1).", bias1=False),
-        m("the output layer's bias b2 is missing: y~ = h @ W2.T + b2.", bias2=False),
+          "statistics.", "x~ = (X - x_mean) / x_std.", norm="none"),
+        m("your normalisation multiplies by the standard deviation; it should make every "
+          "column of unit spread.", "x~ = (X - x_mean) / x_std.", norm="times"),
+        m("you returned the network's normalised output y~; undo the output normalisation "
+          "(the correction is in metres).", "y = y~ * y_std + y_mean.", denorm="none"),
+        m("you normalised the output again instead of undoing it.",
+          "y = y~ * y_std + y_mean, not (y~ - y_mean) / y_std.", denorm="inverse"),
+        m("undoing the output normalisation, you forgot the mean.",
+          "y = y~ * y_std + y_mean.", denorm="no_mean"),
+        m("the hidden layer's bias b1 is missing.", "h = tanh(x~ @ W1.T + b1).", bias1=False),
+        m("the output layer's bias b2 is missing.", "y~ = h @ W2.T + b2.", bias2=False),
         m("you returned the corrected LANDMARK (lm_x, lm_y plus the correction), which is what "
           "TrainedModel.predict returns; the network itself outputs the correction only.",
           landmark=True),
@@ -262,9 +265,9 @@ def check_mapminmax(fn: Callable, fn_reverse: Callable, *, seed: int = 0, n: int
                     f"{fmt(lo[j])} (xmin = xmax): a division by zero. mapminmax leaves a "
                     "constant column unchanged (y = x), as MATLAB documents.")
     check_function(fn, mapminmax, cases, name=name, arg_names=names, quiet=True, mistakes=[
-        Mistake(f"{name} maps [xmin, xmax] to [0, 1]; mapminmax maps it to [-1, 1]: "
-                "y = 2 (x - xmin) / (xmax - xmin) - 1 (the range where tanh is not flat).",
-                _mm_wrong("unit")),
+        Mistake(f"{name} maps [xmin, xmax] to [0, 1]; mapminmax maps it to [-1, 1] (the "
+                "range where tanh is not flat): check your two conditions.", _mm_wrong("unit"),
+                "y = 2 (x - xmin) / (xmax - xmin) - 1."),
         Mistake(f"{name} clips to [-1, 1]. Inputs outside the training range must map outside "
                 "[-1, 1]: clipping changes them silently (and hides that the network has to "
                 "extrapolate there).", _mm_wrong("clip")),
@@ -272,21 +275,22 @@ def check_mapminmax(fn: Callable, fn_reverse: Callable, *, seed: int = 0, n: int
                 "xmin and xmax passed as arguments, the same settings for every later input "
                 "(MATLAB: mapminmax('apply', x, PS)).", _mm_wrong("own")),
         Mistake(f"{name} maps a constant column (xmin = xmax) to 0; mapminmax leaves such a "
-                "column unchanged (y = x), as MATLAB documents.", _mm_wrong("const_zero")),
+                "column unchanged, as MATLAB documents.", _mm_wrong("const_zero"), "y = x there."),
         Mistake(f"{name} maps a constant column (xmin = xmax) to -1; mapminmax leaves such a "
-                "column unchanged (y = x), as MATLAB documents.", _mm_wrong("const_minus_one")),
+                "column unchanged, as MATLAB documents.", _mm_wrong("const_minus_one"),
+                "y = x there."),
     ])
     rev_cases = [(mapminmax(x, lo, hi), lo, hi) for x, lo, hi in cases]
     check_function(fn_reverse, mapminmax_reverse, rev_cases, name=rname, quiet=True,
                    arg_names=["y", "xmin", "xmax"], mistakes=[
-        Mistake(f"{rname} applies the forward mapping again; invert it: "
-                "x = (y + 1) (xmax - xmin) / 2 + xmin.", _mm_reverse_wrong("forward")),
-        Mistake(f"{rname} forgets to add xmin back: x = (y + 1) (xmax - xmin) / 2 + xmin.",
-                _mm_reverse_wrong("no_shift")),
-        Mistake(f"{rname} forgets the +1: y = -1 must give xmin, so x = (y + 1) (xmax - xmin) / 2 "
-                "+ xmin.", _mm_reverse_wrong("no_plus_one")),
-        Mistake(f"{rname} inverts the [0, 1] scaling; mapminmax's range is [-1, 1]: "
-                "x = (y + 1) (xmax - xmin) / 2 + xmin.", _mm_reverse_wrong("unit")),
+        Mistake(f"{rname} applies the forward mapping again; it must undo it (solve your "
+                "forward map for x).", _mm_reverse_wrong("forward"), "x = (y + 1) (xmax - xmin) / 2 + xmin."),
+        Mistake(f"{rname} does not shift back: y = -1 must give xmin.",
+                _mm_reverse_wrong("no_shift"), "x = (y + 1) (xmax - xmin) / 2 + xmin."),
+        Mistake(f"{rname} gives the wrong x at the ends: y = -1 must give xmin and y = 1 "
+                "xmax.", _mm_reverse_wrong("no_plus_one"), "x = (y + 1) (xmax - xmin) / 2 + xmin."),
+        Mistake(f"{rname} inverts the [0, 1] scaling; mapminmax's range is [-1, 1].",
+                _mm_reverse_wrong("unit"), "x = (y + 1) (xmax - xmin) / 2 + xmin."),
     ])
     # the round trip, on the student's own pair
     for x, lo, hi in cases:
@@ -360,28 +364,26 @@ def _no_grad():
     return torch.no_grad()
 
 
-_FROZEN = ("the weights never change, so the loss does not decrease: optimizer.step() is "
-           "missing, or optimizer.zero_grad() runs between loss.backward() and "
-           "optimizer.step() and wipes the gradients before the step can use them. The order "
-           "is zero_grad, forward, loss, backward, step.")
+_FROZEN = ("the weights never change, so the loss does not decrease: either the call that "
+           "moves the weights is missing, or the gradients are wiped before it can use them. "
+           "Look at the order of the pieces.")
 
 #: Known wrong training loops: name -> (message, loop).
 LOOP_MISTAKES = {
     "no zero_grad": (
-        "the gradients accumulate: without optimizer.zero_grad() every loss.backward() ADDS "
-        "to .grad, so epoch k steps along the sum of all gradients so far. Call "
-        "optimizer.zero_grad() at the start of every epoch.", _loop("no_zero_grad")),
+        "the gradients accumulate: every loss.backward() ADDS to .grad, so epoch k steps along "
+        "the sum of all gradients so far. One call is missing (section 1 lists the pieces).",
+        _loop("no_zero_grad")),
     "zero_grad after backward": (_FROZEN, _loop("zero_after_backward")),
     "no step": (_FROZEN, _loop("no_step")),
     "sum instead of mean": (
-        "the loss is the SUM of the squared errors; use the MEAN over all outputs, "
-        "((net(X) - Y) ** 2).mean() or torch.nn.functional.mse_loss (nntool's mse, the "
-        "library's loss). The sum is n * 2 times larger, and so is its gradient: the same "
-        "learning rate then means a much larger step.", _loop("sum")),
+        "the loss is the SUM of the squared errors, not nntool's mse (the library's loss). The "
+        "sum is n * 2 times larger, and so is its gradient: the same learning rate then means "
+        "a much larger step.", _loop("sum")),
     "sum over the two outputs": (
         "the loss sums the squared errors of the two outputs and averages over the samples "
-        "only; the mean squared error averages over all 2 n outputs (twice smaller): "
-        "((net(X) - Y) ** 2).mean().", _loop("sum_coords")),
+        "only; the mean squared error averages over all 2 n outputs (twice smaller).",
+        _loop("sum_coords")),
     "RMSE loss": (
         "the loss is the root of the mean squared error; minimise the MSE itself "
         "(no square root): the gradients differ.", _loop("rmse")),
@@ -390,8 +392,19 @@ LOOP_MISTAKES = {
         "SQUARED error.", _loop("mae")),
     "loss after the step": (
         "the weights are right but your losses are the ones after each step (one epoch "
-        "late); record the loss of the forward pass that the step uses, before "
-        "optimizer.step().", _loop("after_step")),
+        "late); record the loss of the forward pass that the step uses.",
+        _loop("after_step")),
+}
+
+#: What would hand exercise 7.2 over, per known mistake: shown in the instructor's feedback
+#: only (``grading.core.full_feedback``).
+LOOP_ANSWERS = {
+    "no zero_grad": "Call optimizer.zero_grad() at the start of every epoch.",
+    "zero_grad after backward": "The order is zero_grad, forward, loss, backward, step.",
+    "no step": "The order is zero_grad, forward, loss, backward, step.",
+    "sum instead of mean": "((net(X) - Y) ** 2).mean() or torch.nn.functional.mse_loss.",
+    "sum over the two outputs": "((net(X) - Y) ** 2).mean().",
+    "loss after the step": "Record loss.item() before optimizer.step().",
 }
 
 
@@ -447,10 +460,11 @@ def check_train_loop(fn: Callable, *, seed: int = 0, quiet: bool = False) -> str
         if _same(got_l, exp_l) and _same(got_w, exp_w):
             continue
         where = f" ({label}, {epochs} epochs)"
-        for message, wrong in LOOP_MISTAKES.values():
+        for key, (message, wrong) in LOOP_MISTAKES.items():
             wl, ww = run_loop(wrong, k, seed=seed, name="a known mistake")
             if _same(got_l, wl) and _same(got_w, ww):
-                raise GradingError(f"{name}: {message}{where}")
+                told = Mistake(message, wrong, LOOP_ANSWERS.get(key, "")).text
+                raise GradingError(f"{name}: {told}{where}")
         w0 = _params(toy_problem(seed)[0])
         if not np.all(np.isfinite(got_l)) or not np.all(np.isfinite(got_w)):
             raise GradingError(f"{name}: the loss or the weights became NaN or infinite{where}; "
@@ -461,17 +475,20 @@ def check_train_loop(fn: Callable, *, seed: int = 0, quiet: bool = False) -> str
             raise GradingError(
                 f"{name}: the loss does not decrease{where}: {got_l[0]:.4g} at epoch 0, "
                 f"{got_l[-1]:.4g} at the last (the reference goes from {exp_l[0]:.4g} to "
-                f"{exp_l[-1]:.4g}). Minimise the loss: loss.backward() then optimizer.step(), "
-                "with the optimizer you were given.")
+                f"{exp_l[-1]:.4g}). " + Mistake("Minimise the loss, with the optimizer you were "
+                                                 "given.", None, "loss.backward() then "
+                                                 "optimizer.step().").text)
         if _same(got_l, exp_l):
             raise GradingError(f"{name}: the losses agree with the reference but the final "
-                               f"weights do not{where}: one optimizer.step() per epoch, and "
-                               "nothing that changes the weights after the loop.")
+                               f"weights do not{where}: one step per epoch, and nothing that "
+                               "changes the weights after the loop.")
         e = int(np.argmax(~np.isclose(got_l, exp_l, rtol=1e-7, atol=1e-10)))
-        hint = (" The very first loss differs, so the loss function itself is not the mean "
-                "squared error over all outputs, ((net(X) - Y) ** 2).mean()." if e == 0 else
-                " The first loss agrees, so the loss is right but the update is not: one "
-                "zero_grad, backward and step per epoch, with the optimizer you were given.")
+        hint = (" " + Mistake("The very first loss differs, so the loss function itself is "
+                              "not the mean squared error over all outputs.", None,
+                              "((net(X) - Y) ** 2).mean().").text if e == 0 else
+                " " + Mistake("The first loss agrees, so the loss is right but the update is "
+                              "not.", None, "One zero_grad, backward and step per epoch, with "
+                              "the optimizer you were given.").text)
         raise GradingError(f"{name} disagrees with the reference{where}: the loss at epoch {e} "
                            f"is {got_l[e]:.6g}, expected {exp_l[e]:.6g}.{hint}")
     ok = (f"✓ {name} trains like the reference loop (SGD, SGD with momentum, Adam: losses and "

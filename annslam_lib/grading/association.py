@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 from scipy.stats import chi2
+from scipy.stats._distn_infrastructure import rv_continuous
 
 from ..perception.association import GATE, NEW, NEW_LANDMARK, REJECTED, associate, gate_threshold, mahalanobis
 from ..models.observation import observe
@@ -137,25 +138,26 @@ def check_innovation_d2(fn, *, seed: int = 0, n: int = 40,
     mistakes = [
         Mistake(f"{name} does not wrap the bearing innovation: at a landmark predicted just "
                 "below +π and seen just above −π (or the reverse) the bearings differ by "
-                "almost 2π, but the innovation is the small angle between them. Wrap "
-                "ν_β = z_β − ẑ_β into (−π, π] before the quadratic form, e.g. "
-                "(a + np.pi) % (2 * np.pi) - np.pi.", _unwrapped),
-        Mistake(f"{name} computes νᵀ S ν: the Mahalanobis distance uses the INVERSE, "
-                "d2 = νᵀ S⁻¹ ν (np.linalg.solve(S, ν) or np.linalg.inv(S)). With S the "
-                "statistic grows with the uncertainty instead of shrinking.",
-                _quadratic(lambda S, HPH, R: S)),
-        Mistake(f"{name} uses R instead of S: the innovation's covariance is not only the "
-                "laser's noise but S = H P H^T + R, which adds the uncertainty of the pose "
-                "and of the landmark. With R alone a vague prediction looks wrong.",
-                _quadratic(lambda S, HPH, R: np.linalg.inv(R))),
-        Mistake(f"{name} leaves R out of S: S = H P H^T + R, the measurement noise adds to "
-                "the predicted uncertainty.", _quadratic(lambda S, HPH, R: np.linalg.inv(HPH))),
+                "almost 2π, but the innovation is the small angle between them.", _unwrapped,
+                "Wrap ν_β = z_β − ẑ_β into (−π, π] before the quadratic form, e.g. "
+                "(a + np.pi) % (2 * np.pi) - np.pi."),
+        Mistake(f"{name} weighs the innovation with S itself: the statistic then grows with "
+                "the uncertainty instead of shrinking. Look again at which matrix the "
+                "Mahalanobis distance uses (section 9).",
+                _quadratic(lambda S, HPH, R: S),
+                "d2 = νᵀ S⁻¹ ν (np.linalg.solve(S, ν) or np.linalg.inv(S))."),
+        Mistake(f"{name} uses the laser's noise R alone as the innovation's covariance: the "
+                "innovation is also uncertain because the pose and the landmark are, and with "
+                "R alone a vague prediction looks wrong.",
+                _quadratic(lambda S, HPH, R: np.linalg.inv(R)), "S = H P H^T + R."),
+        Mistake(f"{name} leaves the measurement noise out of the innovation's covariance.",
+                _quadratic(lambda S, HPH, R: np.linalg.inv(HPH)), "S = H P H^T + R."),
         Mistake(f"{name} divides each innovation component by its own variance, using only "
                 "the diagonal of S: the range and bearing innovations are correlated "
-                "(S[0, 1] ≠ 0), and d2 = νᵀ S⁻¹ ν needs the full inverse.",
-                _quadratic(lambda S, HPH, R: np.diag(1 / np.diag(S)))),
+                "(S[0, 1] ≠ 0).", _quadratic(lambda S, HPH, R: np.diag(1 / np.diag(S))),
+                "d2 = νᵀ S⁻¹ ν needs the full inverse."),
         Mistake(f"{name} returns the Mahalanobis distance, not its square: the gate compares "
-                "d2 = νᵀ S⁻¹ ν (chi-square distributed) with the chi-square quantile.",
+                "the squared distance (chi-square distributed).",
                 lambda *a: math.sqrt(_d2_reference(*a))),
     ]
     check_function(fn, _d2_reference, cases, name=name, arg_names=_D2_ARGS, mistakes=mistakes,
@@ -197,31 +199,37 @@ def _gate_cases(seed: int, n: int) -> list[tuple]:
             if not math.isfinite(d) or abs(d - _ppf(p, 2)) > 1e-6 * _ppf(p, 2)]
 
 
+#: The gate of exercise 4.2 (what the answers of its mistakes give away).
+_GATE = "−2 ln(1 − prob) = chi2.ppf(prob, 2)"
+
+
 def _gate_mistakes(name: str) -> list[Mistake]:
     t99 = _ppf(0.99, 2)
     return [
-        Mistake(f"{name} uses a chi-square with 1 degree of freedom. The innovation has two "
-                "components (range and bearing), so d2 follows a chi-square with 2 dof: "
-                f"chi2.ppf(prob, 2) ({t99:.2f} at 99 %, not {_ppf(0.99, 1):.2f}).",
-                lambda d, p: d <= _ppf(p, 1)),
-        Mistake(f"{name} uses chi2.ppf(1 - prob, 2) = −2 ln(prob), the quantile that only "
-                "1 − prob of the true measurements stay below; the gate lets through the "
-                "fraction prob. The chi-square CDF with 2 dof is 1 − exp(−x/2), so the gate is "
-                "chi2.ppf(prob, 2) = −2 ln(1 − prob).", lambda d, p: d <= _ppf(1 - p, 2)),
-        Mistake(f"{name} compares √d2 with the chi-square quantile: the quantile is for the "
-                "SQUARED distance, compare d2 itself with chi2.ppf(prob, 2).",
-                lambda d, p: math.sqrt(d) <= _ppf(p, 2)),
-        Mistake(f"{name} compares d2 with √chi2.ppf(prob, 2): d2 is already squared, "
-                "compare it with the quantile itself.",
-                lambda d, p: d <= math.sqrt(_ppf(p, 2))),
+        Mistake(f"{name} uses the threshold of a chi-square with 1 degree of freedom: how many "
+                "components has the innovation, and what does that make the distribution of "
+                "d2?", lambda d, p: d <= _ppf(p, 1),
+                f"The gate is d2 <= {_GATE} ({t99:.2f} at 99 %, not {_ppf(0.99, 1):.2f})."),
+        Mistake(f"{name} uses the threshold that only the share 1 − prob of the true "
+                "measurements stay below; the gate lets through the share prob. Check which "
+                "side of the disc your probability is.", lambda d, p: d <= _ppf(1 - p, 2),
+                "P(d2 <= t) = 1 − exp(−t/2), so the gate is d2 <= −2 ln(1 − prob), "
+                "not −2 ln(prob)."),
+        Mistake(f"{name} compares √d2 with the threshold: the threshold is for the SQUARED "
+                "distance.", lambda d, p: math.sqrt(d) <= _ppf(p, 2),
+                f"Compare d2 itself with {_GATE}."),
+        Mistake(f"{name} compares d2 with the square root of the threshold: d2 is already "
+                "squared.", lambda d, p: d <= math.sqrt(_ppf(p, 2)),
+                f"Compare it with {_GATE} itself."),
         Mistake(f"{name} uses d2 <= 9, the one-dimensional '3σ' rule. In two dimensions the "
-                "3σ ellipse holds only 98.9 %; the gate must follow prob: chi2.ppf(prob, 2).",
-                lambda d, p: d <= 9.0),
-        Mistake(f"{name} ignores prob (it always uses the 99 % threshold {t99:.2f}): "
-                "compute chi2.ppf(prob, 2) from the argument.", lambda d, p: d <= t99),
+                "3σ ellipse holds only 98.9 %; the gate must follow prob.",
+                lambda d, p: d <= 9.0, f"The gate is d2 <= {_GATE}."),
+        Mistake(f"{name} ignores prob (it always uses the 99 % threshold {t99:.2f}): the "
+                "threshold must follow the argument.", lambda d, p: d <= t99,
+                f"The gate is d2 <= {_GATE}."),
         Mistake(f"{name} is inverted: it must return True when the measurement is INSIDE the "
-                "gate (d2 <= chi2.ppf(prob, 2)), i.e. when it may come from the landmark.",
-                lambda d, p: d > _ppf(p, 2)),
+                "gate, i.e. when it may come from the landmark.", lambda d, p: d > _ppf(p, 2),
+                f"Inside means d2 <= {_GATE}."),
     ]
 
 
@@ -236,7 +244,7 @@ def _as_bool(out, name: str, where: str) -> bool:
          f"False.")
 
 
-@forbids(gate_threshold)
+@forbids(gate_threshold, rv_continuous.ppf, rv_continuous.isf)
 def check_in_gate(fn, *, seed: int = 0, n: int = 40, name: str = "my_in_gate",
                   quiet: bool = False) -> str:
     """Grade ``fn(d2, prob) -> bool``, the chi-square gate of notebook 04 section 9: True iff
@@ -255,14 +263,15 @@ def check_in_gate(fn, *, seed: int = 0, n: int = 40, name: str = "my_in_gate",
     if got != exp:
         for m in _gate_mistakes(name):
             if [bool(m.wrong(*c)) for c in cases] == got:
-                fail(m.message)
+                fail(m.text)
         bad = [k for k in range(len(cases)) if got[k] != exp[k]]
         d, p = cases[bad[0]]
         t = _ppf(p, 2)
-        fail(f"{name} decides wrongly at {len(bad)} of {len(cases)} inputs. First: "
-             f"{name}(d2={fmt(d)}, prob={p}) returned {got[bad[0]]}; the {100 * p:g} % gate "
-             f"is d2 <= chi2.ppf({p}, 2) = {t:.4g}, so the measurement is "
-             f"{'inside (True)' if exp[bad[0]] else 'outside (False)'}.")
+        fail(Mistake(f"{name} decides wrongly at {len(bad)} of {len(cases)} inputs. First: "
+                     f"{name}(d2={fmt(d)}, prob={p}) returned {got[bad[0]]}, but the "
+                     f"measurement is {'inside (True)' if exp[bad[0]] else 'outside (False)'} "
+                     f"the {100 * p:g} % gate.", None,
+                     f"The gate is d2 <= {_GATE} = {t:.4g} here.").text)
     ok = f"✓ {name} agrees with the chi-square gate on {len(cases)} inputs."
     if not quiet:
         print(ok)

@@ -23,7 +23,8 @@ from ._tracks import ratio_message, reference_scores, result_of
 from ._tracks import try_run as tracks_try_run
 from .core import NOT_WRITTEN, fail, forbids, passed
 
-__all__ = ["RUNS", "check_runs", "check_consistency", "check_map", "diagnose", "score", "try_run"]
+__all__ = ["RUNS", "check_runs", "check_consistency", "check_map", "check_car_park", "diagnose",
+           "score", "try_run"]
 
 #: The runs the notebook's visible checks use (the hidden ones use others).
 RUNS = ("sim:3001:1",)
@@ -33,6 +34,8 @@ RUNS = ("sim:3001:1",)
 #: not this ratio, then ask for the chapter's midpoint step).
 NEES_RATIO = 1.3
 MAP_RMSE_LIMIT = 0.15
+#: On the Car Park, the path's distance to GPS may be at most this factor of a correct EKF's.
+GPS_RATIO = 1.3
 
 
 
@@ -243,6 +246,35 @@ def check_map(my_slam, pieces=None, *, runs=RUNS, name: str = "my_slam",
         if msg:
             fail(f"{name} on {run!r}: {msg}.{_cause(pieces)}")
     return passed(f"✓ {name} mapped every landmark once on {len(runs)} run(s).", quiet)
+
+
+@_FORBIDS
+def check_car_park(my_slam, pieces=None, *, name: str = "my_slam", quiet: bool = False) -> str:
+    """The real run: on the Car Park every surveyed beacon is mapped (within 1 m), the map's
+    joint NEES per dof against the survey (chapter 05's, with the survey's own
+    uncertainty) is within a factor :data:`NEES_RATIO` of a correct EKF's on the same run,
+    both ways, and the path's RMS distance to GPS after alignment is at most
+    :data:`GPS_RATIO` times a correct EKF's."""
+    s = cap.car_park_scores(_result(my_slam, "car_park", name, pieces))
+    ref = reference_scores("reference", ("car_park",), cap.reference_slam,
+                           lambda r, run: cap.car_park_scores(r))[0]
+    where = f"{name} on the Car Park"
+    if s["matched"] < s["beacons"]:
+        fail(f"{where}: {s['matched']} of the {s['beacons']} surveyed beacons have a landmark "
+             f"within 1 m ({s['landmarks']} landmarks mapped).{_cause(pieces)}")
+    ratio = s["map_nees_per_dof"] / ref["map_nees_per_dof"]
+    if not 1 / NEES_RATIO <= ratio <= NEES_RATIO:
+        fail(f"{ratio_message(f'{where}: the map NEES per dof against the survey', ratio, s['map_nees_per_dof'], ref['map_nees_per_dof']).replace('same runs', 'same run')}"
+             f"; accepted {1 / NEES_RATIO:.2f} to {NEES_RATIO:.2f} times.{_cause(pieces)}")
+    gps = s["gps_rmse_aligned"] / ref["gps_rmse_aligned"]
+    if not gps <= GPS_RATIO:
+        fail(f"{where}: the path is {s['gps_rmse_aligned']:.3f} m RMS from GPS after alignment, "
+             f"{gps:.2f} times a correct EKF's {ref['gps_rmse_aligned']:.3f} m (accepted up to "
+             f"{GPS_RATIO:.2f} times).{_cause(pieces)}")
+    return passed(f"✓ {where}: all {s['beacons']} beacons mapped; map NEES per dof against the "
+                  f"survey {s['map_nees_per_dof']:.2f} ({ratio:.2f} of a correct EKF's); path "
+                  f"{s['gps_rmse_aligned']:.3f} m RMS from GPS ({gps:.2f} of a correct EKF's).",
+                  quiet)
 
 
 def score(my_slam, pieces=None, *, runs=RUNS, points=(1, 5, 2)) -> tuple[float, list[str]]:

@@ -17,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import functools
+import os
 import sys
 import threading
 import types
@@ -28,7 +29,8 @@ import numpy as np
 __all__ = ["GradingError", "Mistake", "Passed", "passed", "call", "check_function", "check_jacobian", "check_raises",
            "describe", "fail", "fmt", "NOT_WRITTEN", "forbids", "forbidden", "watch_calls",
            "function_path", "prefetch", "labelled", "passing_prefetch",
-           "allowing_library_calls"]
+           "allowing_library_calls", "full_feedback",
+           "graded_student", "grading_student"]
 
 NOT_WRITTEN = "is not written yet"
 
@@ -201,9 +203,60 @@ class Mistake:
     """A known wrong answer: if the student's output equals ``wrong(*args)`` on every case
     (within tolerance), the check fails with ``message`` instead of a generic diff.
     ``wrong`` returns the COMPARED part (what a check's ``output=`` extracts), not the whole
-    return value."""
+    return value.
+
+    ``message`` names the KIND of mistake and where to look; it never states the answer.
+    ``answer`` (optional) is what would hand the exercise over (the correct formula): it is
+    added only in the instructor's returned feedback (:func:`full_feedback`), so a student
+    cannot guess-and-check their way to a pass from the messages of their own checks."""
     message: str
     wrong: Callable[..., Any]
+    answer: str = ""
+
+    @property
+    def text(self) -> str:
+        """The message as this audience sees it (with ``answer`` in full feedback)."""
+        if self.answer and _FULL_FEEDBACK.get():
+            return f"{self.message} {self.answer}"
+        return self.message
+
+    def renamed(self, old: str, new: str) -> "Mistake":
+        """The same mistake with ``old`` replaced by ``new`` in its texts (a function's name)."""
+        return Mistake(self.message.replace(old, new), self.wrong, self.answer.replace(old, new))
+
+
+_FULL_FEEDBACK: contextvars.ContextVar[bool] = contextvars.ContextVar(
+    "annslam_full_feedback", default=os.environ.get("ANNSLAM_FEEDBACK", "") == "full")
+
+
+_STUDENT: contextvars.ContextVar[str | None] = contextvars.ContextVar("annslam_student",
+                                                                   default=None)
+
+
+def graded_student() -> str | None:
+    """The student the course's grader is grading (its nbgrader id), None in a notebook."""
+    return _STUDENT.get()
+
+
+@contextlib.contextmanager
+def grading_student(name: str | None):
+    """Grade as student ``name`` (a check drawn per student reads it, never the kernel's)."""
+    token = _STUDENT.set(name)
+    try:
+        yield
+    finally:
+        _STUDENT.reset(token)
+
+
+@contextlib.contextmanager
+def full_feedback():
+    """Messages with their ``answer`` part: the feedback an instructor returns after grading
+    (the course's grader grades inside this; ``ANNSLAM_FEEDBACK=full`` sets it for a kernel)."""
+    token = _FULL_FEEDBACK.set(True)
+    try:
+        yield
+    finally:
+        _FULL_FEEDBACK.reset(token)
 
 
 def fail(message: str) -> None:
@@ -395,7 +448,7 @@ def _diagnose(run: _Run, *, name, labels, angle_mask, wrap_mask, mistakes, cases
         if wrong.shape == got.shape:
             d = np.where(angle_mask, _wrap(got - wrong), got - wrong)
             if _close(d, 0, tol) and not _close(wrong, exp, tol):
-                return m.message
+                return m.text
     # 3. patterns over all cases
     if _close(got, -exp, tol):
         return f"every output of {name} has the wrong sign (e.g. at {run.where[0]}: expected " \

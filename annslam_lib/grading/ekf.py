@@ -125,7 +125,7 @@ def _check_symmetric(fn, table, *, name: str, part=lambda out: out, hint: str) -
 
 def _is_known(e: GradingError, mistakes: Sequence[Mistake]) -> bool:
     msg = str(e)
-    return NOT_WRITTEN in msg or any(msg == m.message for m in mistakes)
+    return NOT_WRITTEN in msg or any(msg == m.text for m in mistakes)
 
 
 # ------------------------------------------------------------------------------ augmentation
@@ -202,35 +202,46 @@ def _aug_wrong_mean(kind: str):
     return wrong
 
 
+# (kind, message, answer): the message names the kind of mistake and where to look; the
+# answer (what would hand the exercise over) is shown only in the instructor's feedback.
 _AUG_MEAN_MISTAKES = [
     ("ahead", "the new landmark is placed 90° off: the bearing was counted from straight "
               "ahead. The ACFR laser counts it from the vehicle's RIGHT (0 = right, pi/2 = "
-              "ahead), so the direction in the world is phi + beta - pi/2: use "
-              "inverse_observe(x[:3], z), which does it for you."),
+              "ahead): see chapter 03's inverse observation.",
+     "The direction in the world is phi + beta - pi/2: inverse_observe(x[:3], z) does it "
+     "for you."),
     ("mirror", "the new landmark is on the wrong side of the car, mirrored through the laser: "
                "you went from the landmark to the sensor. That is the direction of the paper's "
-               "printed bearing (section 4.1, erratum 4.1-bearing: atan((y_L - y_i)/(x_L - x_i)))"
-               "; the landmark is the laser position PLUS r (cos, sin)(phi + beta - pi/2)."),
+               "printed bearing (section 4.1, erratum 4.1-bearing).",
+     "The landmark is the laser position PLUS r (cos, sin)(phi + beta - pi/2)."),
     ("no-heading", "the new landmark ignores the car's heading: the bearing is measured in the "
-                   "laser's frame, so the world direction is phi + beta - pi/2, not beta - pi/2."),
+                   "laser's frame, not in the world's.",
+     "The world direction is phi + beta - pi/2, not beta - pi/2."),
 ]
 
 _AUG_COV_MISTAKES = [
     ("no-old-cross", "the new landmark's cross covariance with the landmarks already in the "
-                     "map is zero. It is G_v P_{v,:}: the new landmark inherits the pose's "
-                     "correlation with EVERY state entry (all columns of the pose rows P[:3, :]"
-                     "), not only with the pose."),
-    ("no-cross", "the new landmark is uncorrelated with the rest of the state: its rows and "
-                 "columns must be G_v P_{v,:} and its transpose (it was placed from an "
-                 "uncertain pose, so it shares that pose's error)."),
-    ("no-noise", "the new landmark's own 2x2 block lacks the measurement noise: it must be "
-                 "G_v P_vv G_v^T + G_z R G_z^T."),
+                     "map is zero. The new landmark inherits the pose's correlation with EVERY "
+                     "state entry, not only with the pose: look at which columns of P the new "
+                     "rows are built from.",
+     "The new rows are G_v P_{v,:}, all columns of the pose rows P[:3, :]."),
+    ("no-cross", "the new landmark is uncorrelated with the rest of the state: it was placed "
+                 "from an uncertain pose, so it shares that pose's error.",
+     "Its rows and columns are G_v P_{v,:} and its transpose."),
+    ("no-noise", "the new landmark's own 2x2 block lacks the measurement noise.",
+     "It is G_v P_vv G_v^T + G_z R G_z^T."),
     ("raw-R", "the measurement noise enters the new landmark's block as R itself; R is the "
-              "covariance of (range, bearing), in m^2 and rad^2. Map it into (x, y) with the "
-              "Jacobian: G_z R G_z^T."),
-    ("no-pose", "the new landmark's own 2x2 block lacks the pose's uncertainty: it must be "
-                "G_v P_vv G_v^T + G_z R G_z^T."),
+              "covariance of (range, bearing), in m^2 and rad^2, not of (x, y): it has to be "
+              "carried into (x, y) first.",
+     "Map it with the Jacobian: G_z R G_z^T."),
+    ("no-pose", "the new landmark's own 2x2 block lacks the pose's uncertainty.",
+     "It is G_v P_vv G_v^T + G_z R G_z^T."),
 ]
+
+
+def _told(message: str, answer: str) -> str:
+    """``message``, with ``answer`` added in the instructor's full feedback only."""
+    return Mistake(message, None, answer).text
 
 
 def _block_note(fn, reference, table, *, name) -> str:
@@ -245,15 +256,18 @@ def _block_note(fn, reference, table, *, name) -> str:
         if not bad.any():
             continue
         n = exp.shape[0] - 2
+        full = bool(_told("", "-").strip())     # the instructor's feedback: with formulas
         blocks = [("the old covariance P (rows and columns 0..n-1, which must not change)",
                    bad[:n, :n]),
-                  ("the new landmark's cross covariance with the pose, G_v P_vv (rows n, n+1; "
-                   "columns 0-2) or its transpose", bad[n:, :3] | bad[:3, n:].T),
-                  ("the new landmark's cross covariance with the old landmarks, G_v P_{v,L} "
-                   "(rows n, n+1; columns 3..n-1) or its transpose",
-                   bad[n:, 3:n] | bad[3:n, n:].T),
-                  ("the new landmark's own block G_v P_vv G_v^T + G_z R G_z^T (rows and columns "
-                   "n, n+1)", bad[n:, n:])]
+                  ("the new landmark's cross covariance with the pose"
+                   + (", G_v P_vv" if full else "") + " (rows n, n+1; columns 0-2) or its "
+                   "transpose", bad[n:, :3] | bad[:3, n:].T),
+                  ("the new landmark's cross covariance with the old landmarks"
+                   + (", G_v P_{v,L}" if full else "") + " (rows n, n+1; columns 3..n-1) or "
+                   "its transpose", bad[n:, 3:n] | bad[3:n, n:].T),
+                  ("the new landmark's own block" + (" G_v P_vv G_v^T + G_z R G_z^T" if full
+                                                    else "") + " (rows and columns n, n+1)",
+                   bad[n:, n:])]
         wrong = [b for b, m in blocks if m.any()]
         return (f"\n  At case '{label}' (n = {n}) the wrong part of P_new: "
                 + "; ".join(wrong) + ".")
@@ -275,13 +289,15 @@ def check_augment(fn: Callable, *, seed: int = 0, n: int = 6) -> str:
     ref = labelled(_aug_ref, table)
     _first_is_pair(fn, table, name)
     groups = _groups(table, lambda a: a[0].size)
-    x_mistakes = [Mistake(msg, labelled(_aug_wrong_mean(k), table)) for k, msg in _AUG_MEAN_MISTAKES]
+    x_mistakes = [Mistake(msg, labelled(_aug_wrong_mean(k), table), ans)
+                  for k, msg, ans in _AUG_MEAN_MISTAKES]
     for labels in groups:
         n_state = table[labels[0]][0].size
         check_function(by, ref, [(lab,) for lab in labels], name=name,
                        arg_names=["case"], labels=_names(n_state, 2), angles=(2,),
                        output=_pair(0, name, "x_new"), mistakes=x_mistakes, quiet=True)
-    p_mistakes = [Mistake(msg, labelled(_aug_wrong_cov(k), table)) for k, msg in _AUG_COV_MISTAKES]
+    p_mistakes = [Mistake(msg, labelled(_aug_wrong_cov(k), table), ans)
+                  for k, msg, ans in _AUG_COV_MISTAKES]
     for labels in groups:
         try:
             check_function(by, ref, [(lab,) for lab in labels], name=f"{name} (P_new)",
@@ -292,8 +308,9 @@ def check_augment(fn: Callable, *, seed: int = 0, n: int = 6) -> str:
                 raise
             sub = {lab: table[lab] for lab in labels}
             _check_symmetric(fn, sub, name=name, part=_pair(1, name, "P_new"),
-                             hint="Build the new rows G_v P[:3, :] once and use their "
-                                  "transpose for the new columns.")
+                             hint=_told("Build the new rows once and use their transpose "
+                                             "for the new columns.",
+                                             "The new rows are G_v P[:3, :]."))
             raise GradingError(_trim(str(e)) + _block_note(fn, _aug_ref, sub, name=name)) from None
     _check_symmetric(fn, table, name=name, part=_pair(1, name, "P_new"),
                      hint="The new columns are the transpose of the new rows.")
@@ -379,24 +396,30 @@ def _joseph_wrong(kind: str):
     return wrong
 
 
+_JOSEPH = "P_new = (I - K H) P (I - K H)^T + K R K^T (the Joseph form)."
 _JOSEPH_MISTAKES = [
-    ("short", "this is the short form (I - K H) P. It equals the Joseph form only for the "
-              "optimal gain K = P H^T S^-1; for any other gain (these cases use scaled, "
-              "perturbed and random gains) it is not the covariance of x + K nu, and mostly "
-              "not even symmetric. Use P_new = (I - K H) P (I - K H)^T + K R K^T."),
-    ("sym-short", "this is the short form (I - K H) P, symmetrised. Symmetrising hides the "
-                  "asymmetry but the numbers stay wrong for a non-optimal gain (these cases use "
-                  "scaled, perturbed and random gains): use (I - K H) P (I - K H)^T + K R K^T."),
-    ("kskt", "this is P - K S K^T, which equals the Joseph form only for the optimal gain "
-             "K = P H^T S^-1. For an arbitrary K use (I - K H) P (I - K H)^T + K R K^T."),
-    ("no-krk", "the term + K R K^T is missing: the measurement noise R enters the estimate "
-               "through the gain, x + K (H e + noise), so it adds K R K^T."),
-    ("transposed", "the transposes are on the wrong side: (I - K H)^T P (I - K H). The error "
-                   "after the update is (I - K H) e, whose covariance is "
-                   "(I - K H) P (I - K H)^T."),
-    ("ksk", "the noise term is K S K^T instead of K R K^T: only the measurement noise R "
-            "passes through the gain as extra noise; H P H^T is already inside "
-            "(I - K H) P (I - K H)^T."),
+    ("short", "this is a short form, right only for the optimal gain K = P H^T S^-1; for any "
+              "other gain (these cases use scaled, perturbed and random gains) it is not the "
+              "covariance of x + K nu, and mostly not even symmetric. Derive the covariance "
+              "of the error after the update for ANY K (section 3).", _JOSEPH),
+    ("sym-short", "this is a short form, symmetrised. Symmetrising hides the asymmetry but "
+                  "the numbers stay wrong for a non-optimal gain (these cases use scaled, "
+                  "perturbed and random gains): derive the covariance of the error after the "
+                  "update for ANY K (section 3).", _JOSEPH),
+    ("kskt", "this is P - K S K^T, which is the covariance only for the optimal gain "
+             "K = P H^T S^-1. Derive the covariance of the error after the update for an "
+             "arbitrary K (section 3).", _JOSEPH),
+    ("no-krk", "the measurement noise is missing: R enters the estimate through the gain "
+               "(x + K nu, and nu carries the noise), so it must add a term of its own.",
+     "The missing term is + K R K^T."),
+    ("transposed", "the transposes are on the wrong side of P: write the error after the "
+                   "update as a matrix times the error before it, and take the covariance of "
+                   "that product.",
+     "The error after the update is (I - K H) e + K eta, whose covariance is "
+     "(I - K H) P (I - K H)^T + K R K^T."),
+    ("ksk", "the noise term passes the innovation covariance S through the gain: only the "
+            "measurement noise enters as extra noise; the state's part of S is already in the "
+            "other term.", "The noise term is K R K^T, not K S K^T."),
 ]
 
 
@@ -412,7 +435,8 @@ def check_joseph_covariance(fn: Callable, *, seed: int = 0, n: int = 4) -> str:
     table = _joseph_cases(seed, n)
     by = labelled(fn, table)
     ref = labelled(ekf_dense.joseph_covariance, table)
-    mistakes = [Mistake(msg, labelled(_joseph_wrong(k), table)) for k, msg in _JOSEPH_MISTAKES]
+    mistakes = [Mistake(msg, labelled(_joseph_wrong(k), table), ans)
+                for k, msg, ans in _JOSEPH_MISTAKES]
     for labels in _groups(table, lambda a: a[1].shape):
         try:
             check_function(by, ref, [(lab,) for lab in labels], name=name, arg_names=["case"],
@@ -421,7 +445,9 @@ def check_joseph_covariance(fn: Callable, *, seed: int = 0, n: int = 4) -> str:
             if _is_known(e, mistakes):
                 raise
             _check_symmetric(fn, {lab: table[lab] for lab in labels}, name=name,
-                             hint="(I - K H) P (I - K H)^T + K R K^T is symmetric for any K.")
+                             hint=_told("The covariance after an update with any gain is a "
+                                        "sum of terms A M A^T, symmetric for any K.",
+                                        _JOSEPH))
             raise GradingError(_trim(str(e))) from None
     _check_symmetric(fn, table, name=name, hint="")
     ok = (f"✓ {name} agrees with the Joseph form on {len(table)} updates with optimal and "
@@ -478,13 +504,15 @@ def _update_wrong_mean(kind: str):
 _UPDATE_MEAN_MISTAKES = [
     ("unwrapped", "the bearing innovation is not wrapped: for a landmark straight to the left "
                   "the bearing is predicted at pi - 0.004 and measured at -pi + 0.006, so "
-                  "z - z_hat = -6.27 rad although the two directions are 0.01 rad apart. Wrap "
-                  "the bearing entries nu[1::2] into (-pi, pi], e.g. "
-                  "(a + np.pi) % (2 * np.pi) - np.pi."),
-    ("reversed", "the innovation has the wrong sign: it is measured minus predicted, "
-                 "nu = z - z_hat (then x_new = x + K nu)."),
-    ("R-gain", "the gain uses R^-1; it is K = P H^T S^-1 with the innovation covariance "
-               "S = H P H^T + R (the measurement's AND the state's uncertainty)."),
+                  "z - z_hat = -6.27 rad although the two directions are 0.01 rad apart.",
+     "Wrap the bearing entries nu[1::2] into (-pi, pi], e.g. "
+     "(a + np.pi) % (2 * np.pi) - np.pi."),
+    ("reversed", "the innovation has the wrong sign: check which of the measured and the "
+                 "predicted values comes first (step 3).",
+     "nu = z - z_hat (then x_new = x + K nu)."),
+    ("R-gain", "the gain weighs with the measurement noise alone: the innovation's covariance "
+               "holds the measurement's AND the state's uncertainty (step 1).",
+     "K = P H^T S^-1 with S = H P H^T + R."),
 ]
 
 
@@ -499,9 +527,10 @@ def _update_wrong_cov(kind: str):
 
 
 _UPDATE_COV_MISTAKES = [
-    ("no-krk", "P_new lacks + K R K^T: the Joseph form is (I - K H) P (I - K H)^T + K R K^T."),
-    ("plus", "P_new = P + K S K^T grows with the update; an observation can only reduce "
-             "uncertainty: P - K S K^T, or better the Joseph form."),
+    ("no-krk", "P_new lacks the measurement noise's term (compare with exercise 5.2).",
+     "The Joseph form is (I - K H) P (I - K H)^T + K R K^T."),
+    ("plus", "P_new grows with the update; an observation can only reduce uncertainty.",
+     "P - K S K^T, or better the Joseph form (I - K H) P (I - K H)^T + K R K^T."),
 ]
 
 
@@ -537,10 +566,10 @@ def check_ekf_update(fn: Callable, *, seed: int = 0, n: int = 5) -> str:
     ref = labelled(ekf_dense.range_bearing_update, table)
     _first_is_pair(fn, table, name)
     groups = _groups(table, lambda a: (a[0].size, a[2].size))
-    x_mistakes = [Mistake(msg, labelled(_update_wrong_mean(k), table))
-                  for k, msg in _UPDATE_MEAN_MISTAKES]
-    p_mistakes = [Mistake(msg, labelled(_update_wrong_cov(k), table))
-                  for k, msg in _UPDATE_COV_MISTAKES]
+    x_mistakes = [Mistake(msg, labelled(_update_wrong_mean(k), table), ans)
+                  for k, msg, ans in _UPDATE_MEAN_MISTAKES]
+    p_mistakes = [Mistake(msg, labelled(_update_wrong_cov(k), table), ans)
+                  for k, msg, ans in _UPDATE_COV_MISTAKES]
     for labels in groups:
         n_state = table[labels[0]][0].size
         check_function(by, ref, [(lab,) for lab in labels], name=name, arg_names=["case"],
@@ -556,11 +585,12 @@ def check_ekf_update(fn: Callable, *, seed: int = 0, n: int = 5) -> str:
                 raise
             _check_symmetric(fn, {lab: table[lab] for lab in labels}, name=name,
                              part=_pair(1, name, "P_new"),
-                             hint="The Joseph form (I - K H) P (I - K H)^T + K R K^T is "
-                                  "symmetric by construction.")
+                             hint=_told("The covariance of exercise 5.2 is symmetric by "
+                                        "construction.", _JOSEPH))
             raise GradingError(_trim(str(e))) from None
     _check_symmetric(fn, table, name=name, part=_pair(1, name, "P_new"),
-                     hint="Use the Joseph form, symmetric by construction.")
+                     hint=_told("Use the covariance of exercise 5.2, symmetric by "
+                                "construction.", _JOSEPH))
     singular = dict(_singular_cases(seed))
     for why in singular:
         check_raises(_returned(fn, singular), (why,), name=name, arg_names=["case"],

@@ -70,28 +70,36 @@ def check_update_1d(fn, *, seed: int = 0, n: int = 40, name: str = "my_update_1d
     """
     cases = _update_cases(seed, n)
     mistakes = [
-        Mistake(f"{name} gives the weight to the wrong side: K = r / (var + r). The gain "
-                "grows with the PRIOR's variance: an uncertain prior (large var) should move "
-                "a long way towards z, so K = var / (var + r).",
-                _weights(lambda var, r: r / (var + r))),
-        Mistake(f"{name} moves the mean away from the measurement: the innovation is "
-                "z − mu, so mu+ = mu + K (z − mu).",
+        Mistake(f"{name} gives the weight to the wrong side: the prior and the measurement "
+                "have swapped weights. An uncertain prior (large var) should move a long way "
+                "towards z, a precise one hardly at all: check which variance makes the gain "
+                "grow.",
+                _weights(lambda var, r: r / (var + r)),
+                answer="The gain grows with the PRIOR's variance: K = var / (var + r), "
+                       "mu+ = mu + K (z − mu)."),
+        Mistake(f"{name} moves the mean away from the measurement: the innovation has the "
+                "wrong sign.",
                 lambda mu, var, z, r: (mu - var / (var + r) * (z - mu),
-                                       _update_reference(mu, var, z, r)[1])),
-        Mistake(f"{name}'s posterior variance is K·var. It is (1 − K)·var = var·r / (var + r): "
-                "smaller than both var and r, because two independent pieces of information "
-                "add up (1/var+ = 1/var + 1/r).",
-                lambda mu, var, z, r: (_update_reference(mu, var, z, r)[0], var * var / (var + r))),
-        Mistake(f"{name} adds the variances: var + r is the variance of a PREDICTION (two "
+                                       _update_reference(mu, var, z, r)[1]),
+                answer="The innovation is z − mu, so mu+ = mu + K (z − mu)."),
+        Mistake(f"{name}'s posterior variance is the share of the prior's variance that the "
+                "measurement REMOVES, not the share that is left. It must be smaller than both "
+                "var and r: two independent pieces of information add up.",
+                lambda mu, var, z, r: (_update_reference(mu, var, z, r)[0], var * var / (var + r)),
+                answer="var+ = (1 − K)·var = var·r / (var + r), i.e. 1/var+ = 1/var + 1/r."),
+        Mistake(f"{name} adds the variances: that is the variance of a PREDICTION (two "
                 "independent errors added); a measurement brings information, so the "
-                "posterior variance var·r / (var + r) is smaller than both.",
-                lambda mu, var, z, r: (_update_reference(mu, var, z, r)[0], var + r)),
+                "posterior variance is smaller than both.",
+                lambda mu, var, z, r: (_update_reference(mu, var, z, r)[0], var + r),
+                answer="var+ = var·r / (var + r)."),
         Mistake(f"{name} returns the prior's variance unchanged: the update must also shrink "
-                "it, var+ = (1 − K) var.",
-                lambda mu, var, z, r: (_update_reference(mu, var, z, r)[0], var)),
-        Mistake(f"{name} weights by the standard deviations (K = σ / (σ + σ_r)): the product "
-                "of two Gaussians weights by the VARIANCES, K = var / (var + r).",
-                _weights(lambda var, r: math.sqrt(var) / (math.sqrt(var) + math.sqrt(r)))),
+                "it.",
+                lambda mu, var, z, r: (_update_reference(mu, var, z, r)[0], var),
+                answer="var+ = (1 − K) var."),
+        Mistake(f"{name} weights by the standard deviations: the product of two Gaussians "
+                "weights by another power of them (look at the exponents you add).",
+                _weights(lambda var, r: math.sqrt(var) / (math.sqrt(var) + math.sqrt(r))),
+                answer="It weights by the VARIANCES, K = var / (var + r)."),
     ]
     check_function(fn, _update_reference, cases, name=name, arg_names=_U_ARGS,
                    labels=("mu_post", "var_post"), mistakes=mistakes, what="kalman.update_1d",
@@ -155,23 +163,24 @@ def check_kalman_gain(fn, *, seed: int = 0, n: int = 30, name: str = "my_kalman_
     cases = _gain_cases(seed, n)
     inv = np.linalg.inv
     mistakes = [
-        Mistake(f"{name} divides by S elementwise (P Hᵀ / S). That is right when the "
-                "measurement is a single number (m = 1), and wrong as soon as it has two "
-                "correlated components: use the matrix inverse, P Hᵀ S⁻¹ "
-                "(np.linalg.solve(S, H @ P).T or P @ H.T @ np.linalg.inv(S)).", _elementwise),
-        Mistake(f"{name} uses R⁻¹ instead of S⁻¹: K = P Hᵀ (H P Hᵀ + R)⁻¹. With R alone "
-                "the filter forgets that the prediction H x is itself uncertain.",
-                lambda P, H, R: P @ H.T @ inv(R)),
-        Mistake(f"{name} multiplies by S instead of its inverse: K = P Hᵀ S⁻¹.",
-                lambda P, H, R: P @ H.T @ (H @ P @ H.T + R)),
-        Mistake(f"{name} leaves R out of S: S = H P Hᵀ + R, the measurement's own noise is "
-                "what keeps the gain below 1.", lambda P, H, R: P @ H.T @ inv(H @ P @ H.T)),
+        Mistake(f"{name} divides by S elementwise. That is right when the measurement is a "
+                "single number (m = 1), and wrong as soon as it has two correlated components: "
+                "'dividing' by a matrix means its matrix inverse.", _elementwise,
+                answer="K = P Hᵀ S⁻¹: np.linalg.solve(S, H @ P).T or P @ H.T @ np.linalg.inv(S)."),
+        Mistake(f"{name} uses R⁻¹ instead of S⁻¹. With R alone the filter forgets that the "
+                "prediction H x is itself uncertain.",
+                lambda P, H, R: P @ H.T @ inv(R), answer="K = P Hᵀ (H P Hᵀ + R)⁻¹."),
+        Mistake(f"{name} multiplies by S instead of its inverse.",
+                lambda P, H, R: P @ H.T @ (H @ P @ H.T + R), answer="K = P Hᵀ S⁻¹."),
+        Mistake(f"{name} leaves R out of S: the measurement's own noise is what keeps the "
+                "gain below 1.", lambda P, H, R: P @ H.T @ inv(H @ P @ H.T),
+                answer="S = H P Hᵀ + R."),
         Mistake(f"{name} inverts only the diagonal of S: the measurement components are "
                 "correlated through H P Hᵀ, so S⁻¹ needs the full inverse.",
                 lambda P, H, R: P @ H.T @ np.diag(1 / np.diag(H @ P @ H.T + R))),
-        Mistake(f"{name} forgets P in front: K = P Hᵀ S⁻¹ (the gain carries the state's "
-                "uncertainty back from measurement space to state space).",
-                lambda P, H, R: H.T @ inv(H @ P @ H.T + R)),
+        Mistake(f"{name} forgets P in front (the gain carries the state's uncertainty back "
+                "from measurement space to state space).",
+                lambda P, H, R: H.T @ inv(H @ P @ H.T + R), answer="K = P Hᵀ S⁻¹."),
     ]
     shapes: dict[tuple, list] = {}
     for c in cases:                  # check_function compares outputs of one shape at a time
@@ -211,8 +220,8 @@ def _check_shapes(fn, cases, *, name, scalar_ok: bool) -> None:
                 raise
             fail(f"{e}\nYour gain is right for every single measurement (m = 1) and fails "
                  f"for m = {c[1].shape[0]}: there S is an m x m matrix, and 'dividing' by it "
-                 f"means multiplying by its inverse, P Hᵀ S⁻¹ (np.linalg.solve(S, H @ P).T "
-                 f"or P @ H.T @ np.linalg.inv(S)), not the elementwise '/' or float(S).")
+                 f"means multiplying by its inverse (np.linalg.solve or np.linalg.inv), not the "
+                 f"elementwise '/' or float(S).")
         try:
             shape = np.shape(np.asarray(out, dtype=float))
         except (TypeError, ValueError):
@@ -273,19 +282,21 @@ def _gate_mistakes(name: str) -> list[Mistake]:
     return [
         Mistake(f"{name} always uses 2 degrees of freedom. d2 = νᵀ S⁻¹ ν has as many "
                 "degrees of freedom as ν has entries: a GPS height alone has 1, a "
-                "range-bearing pair 2, a 3-D position 3. Use chi2.ppf(p, len(nu)).",
-                lambda nu, S, p: _d2(nu, S) <= _ppf(p, 2)),
-        Mistake(f"{name} always uses 1 degree of freedom: use chi2.ppf(p, len(nu)).",
-                lambda nu, S, p: _d2(nu, S) <= _ppf(p, 1)),
-        Mistake(f"{name} uses chi2.ppf(1 − p, dof): that threshold keeps only 1 − p of the "
-                "right measurements. The gate keeps the share p: chi2.ppf(p, dof).",
-                lambda nu, S, p: _d2(nu, S) <= _ppf(1 - p, len(nu))),
+                "range-bearing pair 2, a 3-D position 3.",
+                lambda nu, S, p: _d2(nu, S) <= _ppf(p, 2), answer="Use chi2.ppf(p, len(nu))."),
+        Mistake(f"{name} always uses 1 degree of freedom, whatever the size of ν.",
+                lambda nu, S, p: _d2(nu, S) <= _ppf(p, 1), answer="Use chi2.ppf(p, len(nu))."),
+        Mistake(f"{name} uses the quantile of 1 − p: that threshold keeps only 1 − p of the "
+                "right measurements, and the gate must keep the share p.",
+                lambda nu, S, p: _d2(nu, S) <= _ppf(1 - p, len(nu)),
+                answer="The threshold is chi2.ppf(p, dof)."),
         Mistake(f"{name} compares the distance √d2 with the chi-square quantile: the "
                 "quantile is for the squared distance d2 = νᵀ S⁻¹ ν.",
                 lambda nu, S, p: math.sqrt(_d2(nu, S)) <= _ppf(p, len(nu))),
         Mistake(f"{name} computes νᵀ S ν: the Mahalanobis distance divides by the "
-                "uncertainty, d2 = νᵀ S⁻¹ ν.",
-                lambda nu, S, p: float(nu @ S @ nu) <= _ppf(p, len(nu))),
+                "uncertainty, it does not multiply by it.",
+                lambda nu, S, p: float(nu @ S @ nu) <= _ppf(p, len(nu)),
+                answer="d2 = νᵀ S⁻¹ ν."),
         Mistake(f"{name} uses only the diagonal of S: the components of ν are correlated "
                 "(S has off-diagonal terms), so d2 needs the full inverse.",
                 lambda nu, S, p: float(np.sum(nu**2 / np.diag(S))) <= _ppf(p, len(nu))),
@@ -322,7 +333,7 @@ def check_gate(fn, *, seed: int = 0, n: int = 40, name: str = "my_gate",
     if got != exp:
         for m in _gate_mistakes(name):
             if [bool(m.wrong(*c)) for c in cases] == got:
-                fail(m.message)
+                fail(m.text)
         k = next(i for i in range(len(cases)) if got[i] != exp[i])
         nu, S, p = cases[k]
         d2, t = _d2(nu, S), _ppf(p, len(nu))
@@ -370,11 +381,12 @@ def check_steady_state(fn, *, seed: int = 0, n: int = 40, name: str = "my_steady
     cases = _steady_cases(seed, n)
     mistakes = [
         Mistake(f"{name} returns the PRIOR's stationary variance p− (just before each "
-                "update). The question asks for the posterior, just after: p+ = p− − q, "
-                "or equally p− r / (p− + r).", _p_minus),
-        Mistake(f"{name} takes the other root of p−² − q p− − q r = 0: "
-                "(q − √(q² + 4 q r)) / 2 is negative, no variance. Keep the positive root.",
-                lambda q, r: 0.5 * (q - math.sqrt(q * q + 4 * q * r)) - q),
+                "update). The question asks for the posterior, just after the update.",
+                _p_minus, answer="p+ = p− − q, or equally p− r / (p− + r)."),
+        Mistake(f"{name} takes the negative root of the quadratic: that is no variance. Keep "
+                "the positive root.",
+                lambda q, r: 0.5 * (q - math.sqrt(q * q + 4 * q * r)) - q,
+                answer="p− = (q + √(q² + 4 q r)) / 2 is the root of p−² − q p− − q r = 0 to keep."),
         Mistake(f"{name} has q and r swapped: check which variance the prediction adds "
                 "(q) and which the measurement has (r).", lambda q, r: _steady_reference(r, q)),
         Mistake(f"{name} returns a standard deviation: the question asks for the variance "

@@ -15,9 +15,9 @@ one-line success message (unless ``quiet``, for hidden tests) and returns it.
 | 01, 1.1 encoder to axle speed | ``my_axle_speed(v_e, alpha, H, L)`` | :func:`check_axle_speed` |
 | 01, 1.2 Euler step of the laser | ``my_euler_step(pose, control, dt, L, a, b)`` | :func:`check_euler_step` |
 | 01, 1.3 its Jacobians F, G | ``my_process_jacobians(pose, control, dt, L, a, b)`` | :func:`check_process_jacobians` |
-| 02, 2.1 laser pose from the axle | ``my_laser_pose(axle_pose, a, b)`` | :func:`check_laser_pose` |
-| 02, 2.2 laser velocity (full state) | ``my_laser_velocity(pose, control, L, a, b)`` | :func:`check_laser_velocity` |
-| 02, 2.3 Jacobian of the transform | ``my_laser_pose_jacobian(axle_pose, a, b)`` | :func:`check_laser_pose_jacobian` |
+| 02, 2.1 axle pose from the laser (the inverse transform) | ``my_axle_pose(laser_pose, a, b)`` | :func:`check_axle_pose` |
+| 02, 2.2 Jacobian of the transform | ``my_laser_pose_jacobian(axle_pose, a, b)`` | :func:`check_laser_pose_jacobian` |
+| 02, 2.3 laser velocity through J (not graded) | ``my_laser_velocity(pose, control, L, a, b)`` | :func:`check_laser_velocity` |
 """
 from __future__ import annotations
 
@@ -27,12 +27,12 @@ import numpy as np
 
 from ..models import motion as kinematics
 from .. import paper
-from ..models.geometry import numerical_jacobian, wrap_angle
+from ..models.geometry import from_frame, numerical_jacobian, wrap_angle
 from ..models.vehicle import ACFR_UTE, Vehicle
 from .core import (forbids, GradingError, Mistake, Passed, call, check_function, check_jacobian, describe,
                    fmt, passing_prefetch, prefetch)
 
-__all__ = ["check_axle_speed", "check_euler_step", "check_process_jacobians", "check_laser_pose",
+__all__ = ["check_axle_speed", "check_euler_step", "check_process_jacobians", "check_axle_pose",
            "check_laser_velocity", "check_laser_pose_jacobian"]
 
 _H = ACFR_UTE.H          # the encoder offset plays no role in the laser model
@@ -145,31 +145,35 @@ def _axle_speed_ref(v_e, alpha, H, L):
 
 
 _SPEED_MISTAKES = (
-    Mistake("my_axle_speed returns the encoder speed unchanged. The paper's section 4.1 prints "
-            "V_c = V_c / (1 - tan(alpha) H/L) with V_c on both sides (erratum 4.1-speed): read "
-            "literally that only holds for tan(alpha) = 0. In a turn the back-left wheel runs "
-            "on a circle of radius R - H about the ICR, R = L / tan(alpha), so v_e = v_c (R - H)/R "
-            "and v_c = v_e / (1 - tan(alpha) H/L).",
-            lambda v_e, alpha, H, L: v_e),
-    Mistake("my_axle_speed multiplies by (1 - tan(alpha) H/L): that gives the wheel speed from "
-            "the axle speed (v_e from v_c), the inverse. Solve v_e = v_c (1 - tan(alpha) H/L) "
-            "for v_c: divide.",
-            lambda v_e, alpha, H, L: v_e * (1 - np.tan(alpha) * H / L)),
-    Mistake("my_axle_speed uses 1 + tan(alpha) H/L: the sign of the H term is reversed. The "
-            "encoder is on the LEFT wheel, the inside wheel of a left turn (alpha > 0), which "
-            "runs slower than the axle centre, so v_c > v_e when alpha > 0: "
-            "v_c = v_e / (1 - tan(alpha) H/L).",
-            lambda v_e, alpha, H, L: v_e / (1 + np.tan(alpha) * H / L)),
-    Mistake("my_axle_speed uses 1 + tan(alpha) H/L as a factor: that is only the first-order "
-            "approximation of 1 / (1 - tan(alpha) H/L), off by several percent at full lock. "
-            "Divide by (1 - tan(alpha) H/L) instead.",
-            lambda v_e, alpha, H, L: v_e * (1 + np.tan(alpha) * H / L)),
-    Mistake("my_axle_speed uses L/H where H/L belongs: the correction is "
-            "1 - tan(alpha) H / L (H the encoder's offset, L the wheelbase).",
-            lambda v_e, alpha, H, L: v_e / (1 - np.tan(alpha) * L / H)),
-    Mistake("my_axle_speed uses sin(alpha) where tan(alpha) belongs: the turning radius is "
-            "R = L / tan(alpha), so the correction is 1 - tan(alpha) H / L.",
-            lambda v_e, alpha, H, L: v_e / (1 - np.sin(alpha) * H / L)),
+    Mistake("my_axle_speed returns the encoder speed unchanged: that is the paper's printed "
+            "equation of section 4.1 read literally (V_c on both sides, erratum 4.1-speed), which "
+            "holds only when driving straight. In a turn the encoder wheel and C run on two "
+            "different circles about the ICR at the same rate: compare their radii.",
+            lambda v_e, alpha, H, L: v_e,
+            answer="The back-left wheel runs on a circle of radius R - H about the ICR, "
+                   "R = L / tan(alpha), so v_e = v_c (R - H)/R and v_c = v_e / (1 - tan(alpha) H/L)."),
+    Mistake("my_axle_speed gives the wheel speed from the axle speed (v_e from v_c): the "
+            "inverse of what is asked. Write v_e in terms of v_c, then solve for v_c.",
+            lambda v_e, alpha, H, L: v_e * (1 - np.tan(alpha) * H / L),
+            answer="Solve v_e = v_c (1 - tan(alpha) H/L) for v_c: v_c = v_e / (1 - tan(alpha) H/L)."),
+    Mistake("my_axle_speed has the sign of the H term reversed. The encoder is on the LEFT "
+            "wheel, the inside wheel of a left turn (alpha > 0), which runs slower than the axle "
+            "centre, so v_c > v_e when alpha > 0.",
+            lambda v_e, alpha, H, L: v_e / (1 + np.tan(alpha) * H / L),
+            answer="v_c = v_e / (1 - tan(alpha) H/L)."),
+    Mistake("my_axle_speed uses a first-order approximation of the correction, off by several "
+            "percent at full lock: use the exact ratio of the two radii.",
+            lambda v_e, alpha, H, L: v_e * (1 + np.tan(alpha) * H / L),
+            answer="1 + tan(alpha) H/L approximates 1 / (1 - tan(alpha) H/L): divide by "
+                   "(1 - tan(alpha) H/L) instead."),
+    Mistake("my_axle_speed uses L/H where H/L belongs (H the encoder's offset, L the "
+            "wheelbase): check which length is the turning radius's and which the wheel's.",
+            lambda v_e, alpha, H, L: v_e / (1 - np.tan(alpha) * L / H),
+            answer="The correction is 1 - tan(alpha) H / L."),
+    Mistake("my_axle_speed uses sin(alpha) where another function of alpha belongs: look at "
+            "the turning radius R of section 1.",
+            lambda v_e, alpha, H, L: v_e / (1 - np.sin(alpha) * H / L),
+            answer="R = L / tan(alpha), so the correction is 1 - tan(alpha) H / L."),
 )
 
 
@@ -191,7 +195,7 @@ def check_axle_speed(fn: Callable, *, seed: int = 0, n: int = 40,
     cases += [(2.0, 0.0, U.H, U.L), (0.0, 0.4, U.H, U.L), (2.0, 0.6, U.H, U.L),
               (2.0, -0.6, U.H, U.L), (-1.5, 0.3, U.H, U.L)]
     name = _name(fn, "my_axle_speed")
-    mistakes = [Mistake(m.message.replace("my_axle_speed", name), m.wrong) for m in _SPEED_MISTAKES]
+    mistakes = [m.renamed("my_axle_speed", name) for m in _SPEED_MISTAKES]
     return check_function(_copying(fn), _axle_speed_ref, cases, name=name, arg_names=_SPEED_ARGS,
                           labels=None, mistakes=mistakes, what="motion.axle_speed", quiet=quiet)
 
@@ -222,38 +226,43 @@ def _euler_with(rate: Callable):
 _DISCRETE_MSG = (
     "{name} is the paper's printed discrete model (section 4.1, {reading}; errata "
     "4.1-discrete-x, 4.1-discrete-y, 4.1-discrete-phi). Three misprints: the lever-arm term sits "
-    "INSIDE cos() and sin() (it must be added to V_c cos(phi), not to the angle); the y row has "
-    "+b sin(phi) for -b sin(phi); and the heading row is the yaw rate V_c tan(alpha) / L alone, "
-    "without phi(k-1) + dt. Correct step: pose + dt * (laser velocity), i.e. "
+    "INSIDE cos() and sin() (it belongs outside, added to the axle's term, not to the angle); "
+    "the sign of the y row's b sin(phi) term; and the heading row is the yaw rate alone, not "
+    "the previous heading advanced over the step.")
+_STEP_ANSWER = (
+    "Correct step: pose + dt * (laser velocity), i.e. "
     "x + dt [v cos(phi) - v/L tan(alpha) (a sin(phi) + b cos(phi))], "
     "y + dt [v sin(phi) + v/L tan(alpha) (a cos(phi) - b sin(phi))], phi + dt v tan(alpha) / L.")
 
 _STEP_MISTAKES = (
     Mistake(_DISCRETE_MSG.replace("{reading}", "tan(alpha) read outside the cosine"),
-            _printed_discrete(False)),
+            _printed_discrete(False), answer=_STEP_ANSWER),
     Mistake(_DISCRETE_MSG.replace("{reading}", "tan(alpha) read inside the cosine"),
-            _printed_discrete(True)),
+            _printed_discrete(True), answer=_STEP_ANSWER),
     Mistake("{name} takes cos and sin of the heading RATE: that is the paper's section 2.2 "
             "continuous model read literally, x' = V cos(phi'), y' = V sin(phi') (erratum "
-            "2.2-rate, a stray prime). The car moves along its heading phi: v cos(phi), "
-            "v sin(phi) for the rear axle, plus the lever-arm terms for the laser.",
-            _euler_with(paper.rate_2_2_printed)),
-    Mistake("{name} moves the REAR AXLE (the section 2.2 model x + dt v cos(phi), ..., right "
-            "for the point C), but the state is the LASER pose, a m ahead and b m left of C. "
-            "When the car turns, the lever arm swings: add dt * omega x r, with "
-            "omega = v tan(alpha) / L and r = R(phi) (a, b).",
-            lambda pose, u, dt, L, a, b: kinematics.predict(pose, u, dt, _car(L, 0.0, 0.0))[0]),
+            "2.2-rate, a stray prime). The car moves along its heading, not its heading rate.",
+            _euler_with(paper.rate_2_2_printed),
+            answer="v cos(phi), v sin(phi) for the rear axle, plus the lever-arm terms for the laser."),
+    Mistake("{name} moves the REAR AXLE (the section 2.2 model, right for the point C), but the "
+            "state is the LASER pose, a m ahead and b m left of C. When the car turns, the lever "
+            "arm swings: section 3's laser velocity has the terms you are missing.",
+            lambda pose, u, dt, L, a, b: kinematics.predict(pose, u, dt, _car(L, 0.0, 0.0))[0],
+            answer="Add dt * omega x r, with omega = v tan(alpha) / L and r = R(phi) (a, b)."),
     Mistake("{name} uses the paper's printed 'full state' as the rate (section 4.1, errata "
-            "4.1-full-x and 4.1-full-y): its x row has a cos(phi) where a sin(phi) belongs and "
-            "its y row subtracts the lever-arm term instead of adding it. Derive the laser's "
-            "velocity from P_l = P_c + R(phi) (a, b) (section 3 of this notebook).",
-            _euler_with(paper.full_state_printed)),
+            "4.1-full-x and 4.1-full-y): its x and y rows are misprinted. Derive the laser's "
+            "velocity from the laser's position (section 3 of this notebook).",
+            _euler_with(paper.full_state_printed),
+            answer="The x row has a cos(phi) where a sin(phi) belongs and the y row subtracts the "
+                   "lever-arm term instead of adding it."),
     Mistake("{name} computes the exact circular arc (like motion.predict_exact). That is "
             "the better integrator, but the filter's process model, and the F and G of the "
-            "next exercise, are the EULER step: pose + dt * (laser velocity at the start).",
-            lambda pose, u, dt, L, a, b: kinematics.predict_exact(pose, u, dt, _car(L, a, b))),
-    Mistake("{name} leaves the heading unchanged: it must advance by dt * v tan(alpha) / L.",
-            lambda pose, u, dt, L, a, b: np.r_[_step_ref(pose, u, dt, L, a, b)[:2], pose[2]]),
+            "next exercise, are the EULER step.",
+            lambda pose, u, dt, L, a, b: kinematics.predict_exact(pose, u, dt, _car(L, a, b)),
+            answer="The Euler step is pose + dt * (laser velocity at the start of the step)."),
+    Mistake("{name} leaves the heading unchanged: the car turns during the step.",
+            lambda pose, u, dt, L, a, b: np.r_[_step_ref(pose, u, dt, L, a, b)[:2], pose[2]],
+            answer="It must advance by dt * v tan(alpha) / L."),
 )
 
 
@@ -287,7 +296,7 @@ def check_euler_step(fn: Callable, *, seed: int = 0, n: int = 40,
     """
     cases = _motion_cases(seed, n, with_dt=True)
     name = _name(fn, "my_euler_step")
-    mistakes = [Mistake(m.message.replace("{name}", name), m.wrong) for m in _STEP_MISTAKES]
+    mistakes = [m.renamed("{name}", name) for m in _STEP_MISTAKES]
     student = _copying(fn)
     msg = check_function(student, _step_ref, cases, name=name, arg_names=_STEP_ARGS,
                          labels=_STEP_LABELS, angles=[2], mistakes=mistakes,
@@ -327,9 +336,10 @@ _PRINTED_JAC_MSG = (
     "Differentiate the corrected Euler step pose + dt * (laser velocity) instead.")
 
 _F_MISTAKES = (
-    Mistake("{name}: F has no identity. The step is X_k = X_(k-1) + dt f(X_(k-1), u), so "
-            "F = I + dt df/dX: the ones on the diagonal come from X_(k-1) itself.",
-            lambda pose, u, dt, L, a, b: _ref_fg(1)(pose, u, dt, L, a, b) - np.eye(3)),
+    Mistake("{name}: F has no identity: the step starts from X_(k-1) itself, and that term "
+            "has a derivative too.",
+            lambda pose, u, dt, L, a, b: _ref_fg(1)(pose, u, dt, L, a, b) - np.eye(3),
+            answer="The step is X_k = X_(k-1) + dt f(X_(k-1), u), so F = I + dt df/dX."),
     Mistake("{name}: F is the rear axle's (a = b = 0): d x_k / d phi and d y_k / d phi miss the "
             "lever arm. Turning the car also swings the laser around C: differentiate the "
             "a and b terms of the laser velocity by phi too.",
@@ -341,15 +351,17 @@ _F_MISTAKES = (
 )
 
 _G_MISTAKES = (
-    Mistake("{name}: G lacks the factor dt. The control acts through dt f(X, u), so "
-            "G = dt df/du; you returned the Jacobian of the rate f.",
-            lambda pose, u, dt, L, a, b: _ref_fg(2)(pose, u, 1.0, L, a, b)),
+    Mistake("{name}: G lacks the factor dt: you returned the Jacobian of the rate f, not of "
+            "the step.",
+            lambda pose, u, dt, L, a, b: _ref_fg(2)(pose, u, 1.0, L, a, b),
+            answer="The control acts through dt f(X, u), so G = dt df/du."),
     Mistake("{name}: the columns of G are in the order (alpha, v); the control is "
             "u = (v, alpha), so column 0 is d/dv and column 1 is d/dalpha.",
             lambda pose, u, dt, L, a, b: _ref_fg(2)(pose, u, dt, L, a, b)[:, ::-1]),
     Mistake("{name}: G is the rear axle's (a = b = 0): the laser's velocity also depends on v "
-            "and alpha through the lever-arm terms omega x r, omega = v tan(alpha) / L.",
-            lambda pose, u, dt, L, a, b: _ref_fg(2)(pose, u, dt, L, 0.0, 0.0)),
+            "and alpha through the lever-arm terms.",
+            lambda pose, u, dt, L, a, b: _ref_fg(2)(pose, u, dt, L, 0.0, 0.0),
+            answer="The lever-arm terms are omega x r, omega = v tan(alpha) / L."),
     Mistake(_PRINTED_JAC_MSG.replace("{reading}", "tan(alpha) outside the cosine"),
             _printed_jacobians(False, 1)),
     Mistake(_PRINTED_JAC_MSG.replace("{reading}", "tan(alpha) inside the cosine"),
@@ -378,7 +390,7 @@ def check_process_jacobians(fn: Callable, *, seed: int = 0, n: int = 30,
         try:
             check_jacobian(part, _ref_fg(k + 1), cases, name=which, rows=_FG_ROWS, cols=cols,
                            arg_names=_STEP_ARGS, quiet=True,
-                           mistakes=[Mistake(m.message.replace("{name}", which), m.wrong)
+                           mistakes=[m.renamed("{name}", which)
                                      for m in mist])
         except GradingError as e:   # say which matrix, also in the generic messages
             msg = str(e)
@@ -392,11 +404,12 @@ def check_process_jacobians(fn: Callable, *, seed: int = 0, n: int = 30,
 # ------------------------------------------------------------------ 02, exercise 2.1
 
 _POSE_ARGS = ("axle_pose", "a", "b")
-_POSE_LABELS = ("x_l", "y_l", "phi")
+_AXLE_ARGS = ("laser_pose", "a", "b")
+_AXLE_LABELS = ("x_c", "y_c", "phi")
 
 
-def _laser_ref(pose, a, b):
-    return kinematics.laser_pose(pose, _car(ACFR_UTE.L, a, b))[0]
+def _axle_ref(pose, a, b):
+    return kinematics.axle_pose(pose, _car(ACFR_UTE.L, a, b))[0]
 
 
 def _lever(pose, a, b, rot: Callable):
@@ -405,61 +418,87 @@ def _lever(pose, a, b, rot: Callable):
     return np.array([pose[0] + dx, pose[1] + dy, pose[2]])
 
 
-_VECTOR_FORM_MSG = (
-    "{name} reads the paper's VECTOR form literally, P_l = P_c + a T_theta + b T_phi + pi_2 "
-    "(section 4.1, erratum 4.1-Pl-vector): {how}. The pi/2 belongs inside T: b points to the "
-    "car's LEFT, b T(phi + pi/2) = b (-sin(phi), cos(phi)). The scalar form printed right after "
-    "it is correct: x_l = x_c + a cos(phi) + b cos(phi + pi/2), "
-    "y_l = y_c + a sin(phi) + b sin(phi + pi/2).")
+def _back(rot: Callable) -> Callable:
+    """The laser pose with the lever arm ``rot(phi, a, b)`` taken off its position."""
+    return lambda p, a, b: _lever(p, a, b, lambda f, a, b: tuple(-d for d in rot(f, a, b)))
 
-_POSE_MISTAKES = (
-    Mistake(_VECTOR_FORM_MSG.replace("{how}", "b T(phi) puts the b offset along the heading"),
-            lambda p, a, b: _lever(p, a, b, lambda f, a, b: ((a + b) * np.cos(f), (a + b) * np.sin(f)))),
-    Mistake(_VECTOR_FORM_MSG.replace("{how}", "pi/2 added to both coordinates"),
-            lambda p, a, b: _lever(p, a, b, lambda f, a, b: ((a + b) * np.cos(f) + np.pi / 2,
-                                                            (a + b) * np.sin(f) + np.pi / 2))),
-    Mistake("{name} subtracts the lever arm: that goes from the laser to the axle "
-            "(motion.axle_pose, the inverse). The laser is a m AHEAD of C and b m to its "
-            "left: P_l = P_c + a T(phi) + b T(phi + pi/2).",
-            lambda p, a, b: _lever(p, a, b, lambda f, a, b: (-a * np.cos(f) + b * np.sin(f),
-                                                            -a * np.sin(f) - b * np.cos(f)))),
-    Mistake("{name} rotates (a, b) by -phi (the transposed rotation). The car's frame is carried "
-            "into the world by R(phi): the lever arm is (a cos(phi) - b sin(phi), "
-            "a sin(phi) + b cos(phi)).",
-            lambda p, a, b: _lever(p, a, b, lambda f, a, b: (a * np.cos(f) + b * np.sin(f),
-                                                            -a * np.sin(f) + b * np.cos(f)))),
+
+def _rotated_position(p, a, b):
+    """R(phi)^T applied to the laser's world position, then (a, b) taken off: the world point
+    carried into the car's frame, as if the whole pose had to be inverted."""
+    c, s = np.cos(p[2]), np.sin(p[2])
+    return np.array([c * p[0] + s * p[1] - a, -s * p[0] + c * p[1] - b, p[2]])
+
+
+_INVERSE = ("P_c = P_l - R(phi) (a, b) = P_l - a T(phi) - b T(phi + pi/2): "
+            "x_c = x_l - a cos(phi) + b sin(phi), y_c = y_l - a sin(phi) - b cos(phi).")
+_VECTOR_FORM_MSG = (
+    "{name} undoes the paper's VECTOR form of P_l read literally (section 4.1, erratum "
+    "4.1-Pl-vector): {how}. b is the offset to the car's LEFT: which direction is that, for a "
+    "car heading phi?")
+_VECTOR_FORM_ANSWER = (
+    "The printed P_l = P_c + a T_theta + b T_phi + pi_2 means b T(phi + pi/2) = "
+    "b (-sin(phi), cos(phi)): the pi/2 belongs inside T. The scalar form printed right after it "
+    "is correct, and solved for P_c: " + _INVERSE)
+
+_AXLE_MISTAKES = (
+    Mistake("{name} adds the lever arm: that is the forward transform, from the axle to the "
+            "laser (chapter 01, section 3). Going back, which way does C lie from the laser?",
+            lambda p, a, b: _lever(p, a, b, lambda f, a, b: (a * np.cos(f) - b * np.sin(f),
+                                                            a * np.sin(f) + b * np.cos(f))),
+            answer=_INVERSE),
+    Mistake("{name} turns the lever arm by -phi (the transposed rotation R(phi)^T). The heading "
+            "is shared, so the lever arm in the world is the very vector the forward transform "
+            "added: only its sign changes on the way back.",
+            _back(lambda f, a, b: (a * np.cos(f) + b * np.sin(f), -a * np.sin(f) + b * np.cos(f))),
+            answer="The lever arm in the world is R(phi) (a, b) = (a cos(phi) - b sin(phi), "
+                   "a sin(phi) + b cos(phi)) both ways. " + _INVERSE),
+    Mistake("{name} rotates the laser's position itself into the car's frame: the laser pose "
+            "is already in world coordinates, and only the lever arm turns with the car.",
+            _rotated_position, answer=_INVERSE),
     Mistake("{name} swaps a and b: a is the FORWARD offset (along T(phi)), b the offset to the "
             "LEFT (along T(phi + pi/2)).",
-            lambda p, a, b: _lever(p, a, b, lambda f, a, b: (b * np.cos(f) - a * np.sin(f),
-                                                            b * np.sin(f) + a * np.cos(f)))),
-    Mistake("{name} puts the laser b m to the RIGHT of the car: positive b is to the left, "
-            "along T(phi + pi/2) = (-sin(phi), cos(phi)).",
-            lambda p, a, b: _lever(p, a, b, lambda f, a, b: (a * np.cos(f) + b * np.sin(f),
-                                                            a * np.sin(f) - b * np.cos(f)))),
+            _back(lambda f, a, b: (b * np.cos(f) - a * np.sin(f), b * np.sin(f) + a * np.cos(f))),
+            answer=_INVERSE),
+    Mistake("{name} puts the laser b m to the RIGHT of the car: positive b is to the left.",
+            _back(lambda f, a, b: (a * np.cos(f) + b * np.sin(f), a * np.sin(f) - b * np.cos(f))),
+            answer="The left of a car heading phi is T(phi + pi/2) = (-sin(phi), cos(phi)). "
+                   + _INVERSE),
+    Mistake("{name} takes off only the forward offset a: the laser is also b m to the left "
+            "of C.",
+            _back(lambda f, a, b: (a * np.cos(f), a * np.sin(f))), answer=_INVERSE),
+    Mistake(_VECTOR_FORM_MSG.replace("{how}", "the b offset points along the heading"),
+            _back(lambda f, a, b: ((a + b) * np.cos(f), (a + b) * np.sin(f))),
+            answer=_VECTOR_FORM_ANSWER),
+    Mistake(_VECTOR_FORM_MSG.replace("{how}", "pi/2 added to both coordinates"),
+            _back(lambda f, a, b: ((a + b) * np.cos(f) + np.pi / 2, (a + b) * np.sin(f) + np.pi / 2)),
+            answer=_VECTOR_FORM_ANSWER),
 )
 
 
-@forbids(kinematics.laser_pose)
-def check_laser_pose(fn: Callable, *, seed: int = 0, n: int = 40,
-                     quiet: bool = False) -> str:
-    """Grade ``fn(axle_pose, a, b) -> laser_pose`` (3,): the laser a m ahead and b m left of the
-    rear-axle centre, heading unchanged (notebook 02 "The geometry"; paper 4.1 P_l, whose scalar
-    form is correct; reference ``motion.laser_pose``).
+@forbids(kinematics.axle_pose, kinematics.laser_pose, from_frame)
+def check_axle_pose(fn: Callable, *, seed: int = 0, n: int = 40,
+                    quiet: bool = False) -> str:
+    """Grade ``fn(laser_pose, a, b) -> axle_pose`` (3,): the rear-axle centre, a m behind and b m
+    to the right of the laser, heading unchanged: the inverse of the laser offset transform
+    (notebook 02, exercise 2.1; paper 4.1 P_l solved for P_c; reference ``motion.axle_pose``).
 
     Cases: ``n`` seeded random poses and offsets plus headings 0, pi/2, near +-pi, the laser on
-    the right, a = b = 0 and a pure sideways offset. Known mistakes: the printed vector form read
-    literally (erratum 4.1-Pl-vector, two readings), the inverse transform, R(-phi), a and b
-    swapped, b to the right.
+    the right, a = b = 0 and a pure sideways offset. Known mistakes: the forward transform
+    (lever arm added), R(-phi), the laser's position rotated into the car's frame, a and b
+    swapped, b to the right, b left out, the printed vector form read literally (erratum
+    4.1-Pl-vector, two readings). The library's ``axle_pose`` is refused, and so is the forward
+    transform (``laser_pose``, or ``geometry.from_frame`` with the lever arm negated).
     """
     cases = _pose_cases(seed, n)
-    name = _name(fn, "my_laser_pose")
-    mistakes = [Mistake(m.message.replace("{name}", name), m.wrong) for m in _POSE_MISTAKES]
-    return check_function(_copying(fn), _laser_ref, cases, name=name, arg_names=_POSE_ARGS,
-                          labels=_POSE_LABELS, angles=[2], mistakes=mistakes,
-                          what="motion.laser_pose", quiet=quiet)
+    name = _name(fn, "my_axle_pose")
+    mistakes = [m.renamed("{name}", name) for m in _AXLE_MISTAKES]
+    return check_function(_copying(fn), _axle_ref, cases, name=name, arg_names=_AXLE_ARGS,
+                          labels=_AXLE_LABELS, angles=[2], mistakes=mistakes,
+                          what="motion.axle_pose", quiet=quiet)
 
 
-# ------------------------------------------------------------------ 02, exercise 2.2
+# ------------------------------------------------------------------ 02, exercise 2.3 (not graded)
 
 _RATE_ARGS = ("pose", "control", "L", "a", "b")
 _RATE_LABELS = ("x_dot", "y_dot", "phi_dot")
@@ -482,30 +521,32 @@ def _rate_rows(x_printed: bool, y_printed: bool):
     return rate
 
 
-_X_ROW = ("the x row has a cos(phi) where a sin(phi) belongs: x_dot = v cos(phi) - "
-          "v/L tan(alpha) (a sin(phi) + b cos(phi)) (erratum 4.1-full-x)")
-_Y_ROW = ("the y row subtracts the lever-arm term where it must add it: y_dot = v sin(phi) + "
-          "v/L tan(alpha) (a cos(phi) - b sin(phi)) (erratum 4.1-full-y)")
+_X_ROW = "the x row's lever-arm term has the wrong function of phi on a (erratum 4.1-full-x)"
+_Y_ROW = "the y row's lever-arm term has the wrong sign (erratum 4.1-full-y)"
+_X_ANSWER = "x_dot = v cos(phi) - v/L tan(alpha) (a sin(phi) + b cos(phi))."
+_Y_ANSWER = "y_dot = v sin(phi) + v/L tan(alpha) (a cos(phi) - b sin(phi))."
 
 _RATE_MISTAKES = (
     Mistake("{name} is the paper's printed 'full state' (section 4.1). Two rows are misprinted: "
-            + _X_ROW + "; and " + _Y_ROW + ". The heading row v/L tan(alpha) is right.",
-            _rate_rows(True, True)),
+            + _X_ROW + "; and " + _Y_ROW + ". The heading row is right.",
+            _rate_rows(True, True), answer=_X_ANSWER + " " + _Y_ANSWER),
     Mistake("{name}: the x row is the paper's misprint: " + _X_ROW + ". The y and heading rows "
-            "are right.", _rate_rows(True, False)),
+            "are right.", _rate_rows(True, False), answer=_X_ANSWER),
     Mistake("{name}: the y row is the paper's misprint: " + _Y_ROW + ". The x and heading rows "
-            "are right.", _rate_rows(False, True)),
-    Mistake("{name} is the rear axle's velocity (v cos(phi), v sin(phi), omega), right for the "
-            "point C but not for the laser: the lever arm r = R(phi) (a, b) turns with the car, "
-            "so add omega x r = omega (-r_y, r_x), omega = v tan(alpha) / L.",
-            lambda pose, u, L, a, b: _rate_ref(pose, u, L, 0.0, 0.0)),
-    Mistake("{name} turns the lever arm the wrong way: omega x r in the plane is "
-            "omega (-r_y, r_x), r rotated by +90 degrees (counter-clockwise), not omega (r_y, -r_x).",
-            lambda pose, u, L, a, b: 2 * _rate_ref(pose, u, L, 0.0, 0.0) - _rate_ref(pose, u, L, a, b)),
+            "are right.", _rate_rows(False, True), answer=_Y_ANSWER),
+    Mistake("{name} is the rear axle's velocity, right for the point C but not for the laser: "
+            "the lever arm from C to the laser turns with the car.",
+            lambda pose, u, L, a, b: _rate_ref(pose, u, L, 0.0, 0.0),
+            answer="Add omega x r = omega (-r_y, r_x), r = R(phi) (a, b), omega = v tan(alpha) / L."),
+    Mistake("{name} turns the lever arm the wrong way in omega x r (clockwise instead of "
+            "counter-clockwise for a left turn).",
+            lambda pose, u, L, a, b: 2 * _rate_ref(pose, u, L, 0.0, 0.0) - _rate_ref(pose, u, L, a, b),
+            answer="omega x r in the plane is omega (-r_y, r_x), not omega (r_y, -r_x)."),
     Mistake("{name} takes cos and sin of the heading RATE: the section 2.2 model read literally, "
-            "x' = V cos(phi') (erratum 2.2-rate, a stray prime); it is cos(phi), and the laser "
-            "needs the lever-arm terms as well.",
-            lambda pose, u, L, a, b: paper.rate_2_2_printed(pose, u, _car(L, a, b))),
+            "x' = V cos(phi') (erratum 2.2-rate, a stray prime); the laser also needs the "
+            "lever-arm terms.",
+            lambda pose, u, L, a, b: paper.rate_2_2_printed(pose, u, _car(L, a, b)),
+            answer="It is cos(phi) and sin(phi) of the heading itself."),
 )
 
 
@@ -522,13 +563,13 @@ def check_laser_velocity(fn: Callable, *, seed: int = 0, n: int = 40,
     """
     cases = _motion_cases(seed, n, with_dt=False)
     name = _name(fn, "my_laser_velocity")
-    mistakes = [Mistake(m.message.replace("{name}", name), m.wrong) for m in _RATE_MISTAKES]
+    mistakes = [m.renamed("{name}", name) for m in _RATE_MISTAKES]
     return check_function(_copying(fn), _rate_ref, cases, name=name, arg_names=_RATE_ARGS,
                           labels=_RATE_LABELS, mistakes=mistakes,
                           what="motion.laser_velocity", quiet=quiet)
 
 
-# ------------------------------------------------------------------ 02, exercise 2.3
+# ------------------------------------------------------------------ 02, exercise 2.2
 
 _J_ROWS = ("x_l", "y_l", "phi_l")
 _J_COLS = ("x_c", "y_c", "phi")
@@ -546,18 +587,19 @@ def _with_column(pose, a, b, col):
 
 _JAC_MISTAKES = (
     Mistake("{name}: the heading column has the wrong sign in both rows; that is the Jacobian "
-            "of the inverse transform (motion.axle_pose, which subtracts the lever arm). "
-            "d x_l / d phi = d/dphi (a cos(phi) - b sin(phi)).",
+            "of the inverse transform (motion.axle_pose, which subtracts the lever arm).",
             lambda p, a, b: _with_column(p, a, b, lambda f, a, b: (a * np.sin(f) + b * np.cos(f),
-                                                                  -a * np.cos(f) + b * np.sin(f)))),
-    Mistake("{name}: the diagonal is missing. x_l = x_c + ..., so d x_l / d x_c = 1, and "
-            "likewise for y and phi: J = I plus the heading column.",
-            lambda p, a, b: _jac_ref(p, a, b) - np.eye(3)),
-    Mistake("{name} differentiates the paper's vector form read literally, with b T(phi) for "
-            "b T(phi + pi/2) (section 4.1, erratum 4.1-Pl-vector): b points to the car's left, "
-            "so its column entries are -b cos(phi) and -b sin(phi).",
+                                                                  -a * np.cos(f) + b * np.sin(f))),
+            answer="d x_l / d phi = d/dphi (a cos(phi) - b sin(phi))."),
+    Mistake("{name}: the diagonal is missing: the laser's position moves one for one with the "
+            "axle's, and its heading is the car's.",
+            lambda p, a, b: _jac_ref(p, a, b) - np.eye(3),
+            answer="d x_l / d x_c = 1, and likewise for y and phi: J = I plus the heading column."),
+    Mistake("{name} differentiates the paper's vector form read literally, with the b offset "
+            "along the heading (section 4.1, erratum 4.1-Pl-vector): b points to the car's left.",
             lambda p, a, b: _with_column(p, a, b, lambda f, a, b: (-(a + b) * np.sin(f),
-                                                                  (a + b) * np.cos(f)))),
+                                                                  (a + b) * np.cos(f))),
+            answer="The b entries of the heading column are -b cos(phi) and -b sin(phi)."),
 )
 
 
@@ -568,13 +610,13 @@ def check_laser_pose_jacobian(fn: Callable, *, seed: int = 0, n: int = 30,
     to the axle pose (x_c, y_c, phi) (notebook 02 "The Jacobian of the transform"; reference
     ``motion.laser_pose``, checked against SymPy and finite differences).
 
-    Cases as in :func:`check_laser_pose`. A wrong entry is named ('d y_l / d phi (entry
+    Cases as in :func:`check_axle_pose`. A wrong entry is named ('d y_l / d phi (entry
     [1, 2])') with sign errors and transposes flagged. Known mistakes: the inverse's Jacobian,
     no identity, the literal vector form (erratum 4.1-Pl-vector).
     """
     cases = _pose_cases(seed, n)
     name = _name(fn, "my_laser_pose_jacobian")
-    mistakes = [Mistake(m.message.replace("{name}", name), m.wrong) for m in _JAC_MISTAKES]
+    mistakes = [m.renamed("{name}", name) for m in _JAC_MISTAKES]
     return check_jacobian(_copying(fn), _jac_ref, cases, name=name, rows=_J_ROWS, cols=_J_COLS,
                           arg_names=_POSE_ARGS, mistakes=mistakes,
                           what="the Jacobian of motion.laser_pose", quiet=quiet)

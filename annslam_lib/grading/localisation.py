@@ -115,20 +115,22 @@ def check_beacon_update(fn, *, seed: int = 0, n: int = 40, name: str = "my_beaco
     mistakes = [
         Mistake(f"{name} uses the Jacobian with respect to the LANDMARK (the third output of "
                 "observation.observe), not the one with respect to the pose: the map is known, "
-                "the pose is what the update corrects, so H = ∂h/∂pose (its second output).",
-                _variant(H_of=lambda Hp, Hm: np.column_stack([Hm, np.zeros(2)]))),
+                "the pose is what the update corrects.",
+                _variant(H_of=lambda Hp, Hm: np.column_stack([Hm, np.zeros(2)])),
+                "H = ∂h/∂pose (its second output)."),
         Mistake(f"{name} does not wrap the bearing innovation: a beacon predicted just below "
-                "+π and seen just above −π is 0.007 rad off, not almost 2π. Wrap "
-                "ν_β = z_β − ẑ_β into (−π, π] before using it.",
-                _variant(nu_of=lambda nu: nu)),
+                "+π and seen just above −π is 0.007 rad off, not almost 2π.",
+                _variant(nu_of=lambda nu: nu), "Wrap ν_β = z_β − ẑ_β into (−π, π] before "
+                "using it."),
         Mistake(f"{name} leaves the heading unwrapped after the update: φ + (K ν)_φ can step "
                 "over ±π, and the pose's heading must stay in (−π, π].",
                 _variant(wrap_heading=False)),
-        Mistake(f"{name} uses ẑ − z as the innovation: the correction K ν must move the "
-                "prediction TOWARDS the measurement, ν = z − ẑ.",
-                _variant(nu_of=lambda nu: -np.array([nu[0], _wrap(nu[1])]))),
-        Mistake(f"{name} leaves R out of S = H P Hᵀ + R: the gain then trusts the sighting "
-                "as if the laser had no noise.", _variant(R_used=False)),
+        Mistake(f"{name} has the innovation's sign reversed: the correction K ν must move the "
+                "prediction TOWARDS the measurement.",
+                _variant(nu_of=lambda nu: -np.array([nu[0], _wrap(nu[1])])), "ν = z − ẑ."),
+        Mistake(f"{name} leaves the laser's noise out of the innovation covariance: the gain "
+                "then trusts the sighting as if the laser had no noise.",
+                _variant(R_used=False), "S = H P Hᵀ + R."),
     ]
     check_function(fn, _reference, cases, name=name, arg_names=_U_ARGS, labels=_LABELS,
                    angles=[2], mistakes=mistakes, output=_flat,
@@ -212,17 +214,18 @@ def _verdict_mistakes(name: str) -> list[Mistake]:
     return [
         Mistake(f"{name} checks only the upper side: an average NIS far BELOW its band is a "
                 "finding too (the filter's S is too large: R or Q over-stated, as on the Car "
-                "Park). Use the two-sided band chi2.ppf((1 ∓ p)/2, D) / D.", one_sided),
-        Mistake(f"{name} uses chi2.ppf(1 − p, D) and chi2.ppf(p, D): that band holds 2p − 1 "
-                "of the averages, not p. A two-sided band of probability p leaves (1 − p)/2 "
-                "on each side: chi2.ppf((1 − p)/2, D) and chi2.ppf((1 + p)/2, D).", same_q),
+                "Park).", one_sided, "Use the two-sided band chi2.ppf((1 ∓ p)/2, D) / D."),
+        Mistake(f"{name}'s band holds 2p − 1 of the averages, not p: a two-sided band of "
+                "probability p leaves (1 − p)/2 on each side.", same_q,
+                "chi2.ppf((1 − p)/2, D) and chi2.ppf((1 + p)/2, D), not chi2.ppf(1 − p, D) "
+                "and chi2.ppf(p, D)."),
         Mistake(f"{name} judges the average with the band of a SINGLE update: the sum of the "
                 "run's NIS is chi-square with the SUMMED dof D, and its band per dof narrows "
                 "as D grows.", per_update),
         Mistake(f"{name} counts updates, not degrees of freedom: D is the sum of the dof "
                 "(each range-bearing sighting adds 2).", count_not_dof),
-        Mistake(f"{name} compares the mean NIS per update with a band per dof: divide the "
-                "summed NIS by the summed dof.", not_per_dof),
+        Mistake(f"{name} compares the mean NIS per update with a band per dof.", not_per_dof,
+                "Divide the summed NIS by the summed dof."),
         Mistake(f"{name} has 'too small' and 'too large' swapped: the verdict names the "
                 "average NIS, 'too small' when it lies below the band.", swapped),
     ]
@@ -252,7 +255,7 @@ def check_nis_verdict(fn, *, seed: int = 0, n: int = 40, name: str = "my_nis_ver
     if got != exp:
         for m in _verdict_mistakes(name):
             if [m.wrong(*c) for c in cases] == got:
-                fail(m.message)
+                fail(m.text)
         k = next(i for i in range(len(cases)) if got[i] != exp[i])
         _, avg, lo, hi = localisation.nis_verdict(*cases[k])
         fail(f"{name}({describe(cases[k], _V_ARGS)}) returned {got[k]!r}, expected {exp[k]!r}: "

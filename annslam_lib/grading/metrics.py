@@ -109,30 +109,33 @@ def _rmse_wrong(kind: str):
     return wrong
 
 
+# (kind, message, answer): the answer is shown only in the instructor's feedback.
 _RMSE_MISTAKES = [
-    ("mean", "this is the MEAN error, not the root-mean-square: square the errors, average, "
-             "then take the square root. (The RMS weighs large errors more; the chapter "
-             "reports both it and the median because of that.)"),
-    ("mse", "this is the mean SQUARED error (m^2): take its square root to get metres."),
+    ("mean", "this is the MEAN error, not the root-mean-square. (The RMS weighs large errors "
+             "more; the chapter reports both it and the median because of that.)",
+     "Square the errors, average, then take the square root."),
+    ("mse", "this is the mean SQUARED error (m^2): take its square root to get metres.", ""),
     ("per-axis", "this is the RMS over the 2N coordinates (dx and dy averaged separately), "
-                 "smaller by a factor sqrt(2): the error at a fix is the DISTANCE "
-                 "sqrt(dx^2 + dy^2), and the RMSE is the root of the mean of its square."),
-    ("median", "this is the median error, not the RMSE."),
+                 "smaller by a factor sqrt(2): the error at a fix is a DISTANCE.",
+     "The error at a fix is sqrt(dx^2 + dy^2), and the RMSE is the root of the mean of its "
+     "square."),
+    ("median", "this is the median error, not the RMSE.", ""),
     ("nearest", "the track is read at its NEAREST sample instead of being interpolated to the "
-                "fix time: at 6 m/s a 12.5 ms difference is 7.5 cm. Interpolate x and y "
-                "linearly in time (np.interp(gps_t, traj[:, 0], traj[:, 1]), and the same for "
-                "y)."),
+                "fix time: at 6 m/s a 12.5 ms difference is 7.5 cm.",
+     "Interpolate x and y linearly in time (np.interp(gps_t, traj[:, 0], traj[:, 1]), and "
+     "the same for y)."),
     ("previous", "the track is read at the last sample BEFORE each fix (a zero-order hold) "
-                 "instead of being interpolated to the fix time: interpolate x and y linearly "
-                 "in time (np.interp)."),
+                 "instead of being interpolated to the fix time.",
+     "Interpolate x and y linearly in time (np.interp)."),
     ("clamped", "fixes before the first or after the last track sample are included: np.interp "
                 "does not extrapolate, it repeats the end value, so those fixes are compared "
-                "with a pose the car had at another time. Keep only the fixes with "
-                "traj[0, 0] <= t <= traj[-1, 0]."),
+                "with a pose the car had at another time.",
+     "Keep only the fixes with traj[0, 0] <= t <= traj[-1, 0]."),
     ("gps-interp", "the GPS is interpolated to the track's times. Across a GPS gap (up to a "
                    "minute in Victoria Park) the straight line between two fixes is not where "
-                   "the car was: compare only AT the fixes, interpolating the track (the "
-                   "40 Hz estimate) to their times, and never the GPS."),
+                   "the car was.",
+     "Compare only AT the fixes, interpolating the track (the 40 Hz estimate) to their "
+     "times, and never the GPS."),
 ]
 
 
@@ -193,7 +196,8 @@ def check_track_rmse(fn: Callable, *, seed: int = 0, n: int = 4, real=None) -> s
         traj = np.asarray(traj, dtype=float)
         table[f"#{len(table)}: the chapter's run, {traj.shape[0]} track samples against "
               f"{len(gps)} GPS fixes"] = (traj, gps.t, gps.xy)
-    mistakes = [Mistake(msg, labelled(_rmse_wrong(k), table)) for k, msg in _RMSE_MISTAKES]
+    mistakes = [Mistake(msg, labelled(_rmse_wrong(k), table), ans)
+                for k, msg, ans in _RMSE_MISTAKES]
     check_function(labelled(fn, table), labelled(_rmse_ref, table),
                    [(lab,) for lab in table], name=name, arg_names=["case"], atol=1e-9,
                    rtol=1e-9, mistakes=mistakes, quiet=True)
@@ -291,16 +295,19 @@ def _outliers_wrong(kind: str):
 
 _OUTLIER_MISTAKES = [
     ("every-fast", "you flag every fast step, so the fix AFTER a one-fix spike is flagged too: "
-                   "its step is the way back from the spike. Flag fix i only if its step is "
-                   "too fast AND fix i - 1 is not itself flagged (a loop over the fixes)."),
+                   "its step is the way back from the spike.",
+     "Flag fix i only if its step is too fast AND fix i - 1 is not itself flagged (a loop "
+     "over the fixes)."),
     ("fixed-dt", "the allowed step uses a fixed 0.2 s between fixes. After a GPS gap the car "
-                 "may legitimately be 100 m further on: allow max_speed * (t[i] - t[i-1]) + "
-                 "tolerance, with the actual time since the previous fix."),
+                 "may legitimately be 100 m further on.",
+     "Allow max_speed * (t[i] - t[i-1]) + tolerance, with the actual time since the previous "
+     "fix."),
     ("no-tolerance", "the tolerance is missing: a receiver jitters by a metre or two between "
-                     "fixes 0.2 s apart, which at 10 m/s * 0.2 s = 2 m is already 'too fast'. "
-                     "Allow max_speed * dt + tolerance."),
-    ("one-early", "every flag is one fix early: np.diff(...)[i] is the step from fix i to fix "
-                  "i + 1, so it belongs to fix i + 1 (the fix that arrived too far away)."),
+                     "fixes 0.2 s apart, which at 10 m/s * 0.2 s = 2 m is already 'too fast'.",
+     "Allow max_speed * dt + tolerance."),
+    ("one-early", "every flag is one fix early: check to which fix each step belongs.",
+     "np.diff(...)[i] is the step from fix i to fix i + 1, so it belongs to fix i + 1 (the "
+     "fix that arrived too far away)."),
 ]
 
 
@@ -355,11 +362,11 @@ def check_gps_outliers(fn: Callable, *, seed: int = 0, n: int = 3, gps: Gps | No
         exp[label] = _outliers_ref(t, xy, max_speed, tolerance)
     bad = [lab for lab in table if not np.array_equal(got[lab], exp[lab])]
     if bad:
-        for kind, msg in _OUTLIER_MISTAKES:
+        for kind, msg, ans in _OUTLIER_MISTAKES:
             w = _outliers_wrong(kind)
             wrong = {lab: w(*table[lab], max_speed, tolerance) for lab in table}
             if all(np.array_equal(got[lab], wrong[lab]) for lab in table):
-                raise GradingError(msg)
+                raise GradingError(Mistake(msg, w, ans).text)
         lab = bad[0]
         t, xy = table[lab]
         extra = np.flatnonzero(got[lab] & ~exp[lab])

@@ -23,8 +23,8 @@ __all__ = ["check_observe", "check_observation_jacobian", "check_inverse_observe
 
 #: Explains a +-90 degree bearing offset: the laser's (ACFR) convention.
 BEARING_HINT = ("The laser counts bearings from the vehicle's RIGHT (the ACFR convention): "
-                "0 = right, π/2 = straight ahead, π = left. atan2(dy, dx) − φ is the angle "
-                "from straight ahead, so the bearing is atan2(dy, dx) − φ + π/2.")
+                "0 = right, π/2 = straight ahead, π = left; atan2(dy, dx) − φ is the angle "
+                "from straight ahead.")
 
 _POSE_LM = ("pose", "landmark")
 
@@ -71,8 +71,9 @@ _PRINTED_BEARING = (
     "{name} computes the bearing as the paper prints it (sections 4.1 and 4.2): "
     "atan((y_L − y_i)/(x_L − x_i)) − θ + π/2. Single-argument arctan of a ratio cannot tell "
     "(dx, dy) from (−dx, −dy), so the bearing is off by π for every landmark with "
-    "x_i < x_L (e.g. at {where}: expected {exp:.4g}, got {got:.4g}). Use the two-argument "
-    "np.arctan2(y_i − y, x_i − x), which keeps the quadrant (erratum 4.1-bearing).")
+    "x_i < x_L (e.g. at {where}: expected {exp:.4g}, got {got:.4g}). Use an arctangent that "
+    "keeps the quadrant (erratum 4.1-bearing).")
+_PRINTED_BEARING_ANSWER = "The bearing is np.arctan2(y_i − y, x_i − x) − φ + π/2, wrapped."
 
 
 def _printed_message(name: str, cases) -> str:
@@ -108,28 +109,29 @@ def check_observe(fn, *, seed: int = 0, n: int = 60, name: str = "my_observe",
     cases = _pose_landmark_cases(seed, n, avoid_seam=True)
     printed = _printed_message(name, cases)
     mistakes = [
-        Mistake(printed, _quiet(paper.observation_printed)),
+        Mistake(printed, _quiet(paper.observation_printed), answer=_PRINTED_BEARING_ANSWER),
         # the same with the differences the other way round: equal to the print except
         # where dx = 0 exactly (the sign of the zero picks +-pi/2)
         Mistake(printed, _bearing_variant(lambda dx, dy, phi: np.arctan(dy / dx) - phi
-                                          + np.pi / 2)),
+                                          + np.pi / 2), answer=_PRINTED_BEARING_ANSWER),
         Mistake(f"{name} uses single-argument arctan of dy/dx (the paper's form, which loses "
-                "the quadrant: off by π when x_i < x_L) AND leaves out the +π/2. "
-                + BEARING_HINT.replace("atan2(dy, dx)", "np.arctan2(dy, dx)"),
-                _bearing_variant(lambda dx, dy, phi: np.arctan(dy / dx) - phi)),
-        Mistake(f"{name}'s bearing is off by 180° at every input: either it subtracts π/2 "
-                "(the laser's convention adds it: 0 = right, π/2 = ahead) or it takes the "
-                "direction from the landmark to the laser, atan2(y − y_i, x − x_i) (the "
-                "paper's Δ = x − x_i). The bearing points from the laser to the landmark: "
-                "atan2(y_i − y, x_i − x) − φ + π/2.",
-                _bearing_variant(lambda dx, dy, phi: np.arctan2(dy, dx) - phi - np.pi / 2)),
+                "the quadrant: off by π when x_i < x_L) AND leaves out the laser's bearing "
+                "convention. " + BEARING_HINT,
+                _bearing_variant(lambda dx, dy, phi: np.arctan(dy / dx) - phi),
+                answer=_PRINTED_BEARING_ANSWER),
+        Mistake(f"{name}'s bearing is off by 180° at every input: either it gets the laser's "
+                "convention backwards (0 = right, π/2 = ahead) or it takes the direction from "
+                "the landmark to the laser (the paper's Δ = x − x_i). The bearing points from "
+                "the laser to the landmark.",
+                _bearing_variant(lambda dx, dy, phi: np.arctan2(dy, dx) - phi - np.pi / 2),
+                answer="atan2(y_i − y, x_i − x) − φ + π/2."),
         Mistake(f"{name} adds the heading: the bearing is measured in the laser's frame, so "
-                "turning the laser left by δφ moves every bearing by −δφ: "
-                "atan2(dy, dx) − φ + π/2, not + φ.",
-                _bearing_variant(lambda dx, dy, phi: np.arctan2(dy, dx) + phi + np.pi / 2)),
-        Mistake(f"{name} swaps the arguments of np.arctan2: it takes (y, x), i.e. "
-                "np.arctan2(dy, dx), not np.arctan2(dx, dy).",
-                _bearing_variant(lambda dx, dy, phi: np.arctan2(dx, dy) - phi + np.pi / 2)),
+                "turning the laser left by δφ moves every bearing by −δφ.",
+                _bearing_variant(lambda dx, dy, phi: np.arctan2(dy, dx) + phi + np.pi / 2),
+                answer="atan2(dy, dx) − φ + π/2, not + φ."),
+        Mistake(f"{name} swaps the arguments of np.arctan2: it takes (y, x).",
+                _bearing_variant(lambda dx, dy, phi: np.arctan2(dx, dy) - phi + np.pi / 2),
+                answer="np.arctan2(dy, dx), not np.arctan2(dx, dy)."),
     ]
     return check_function(fn, lambda p, m: observe(p, m)[0], cases, name=name,
                           arg_names=_POSE_LM, labels=("range", "bearing"), angles=[1],
@@ -149,16 +151,21 @@ def _reference_jacobian(pose, lm):
 
 def _printed_jacobian_message(name: str, alignment: int) -> str:
     where = "x_i" if alignment == 0 else "y_i"
-    wrong = ("d range / d x_i (printed −Δy/Δ, must be −Δx/Δ), d range / d y_i (printed 0, "
-             "must be −Δy/Δ)" if alignment == 0 else
-             "d range / d x_i (printed 0, must be −Δx/Δ)")
+    wrong = ("d range / d x_i, d range / d y_i" if alignment == 0 else "d range / d x_i")
     return (f"{name} is the Jacobian printed in the paper's section 4.2, reading its lone "
             f"−Δy/Δ of the range row in the {where} column (Δx = x − x_i, Δy = y − y_i, "
             f"Δ = range). Its vehicle columns and d bearing / d x_i are right, but these "
-            f"landmark entries are misprinted: {wrong} and d bearing / d y_i (printed Δy/Δ², "
-            f"a repeat of the x_i entry; must be −Δx/Δ²). The measurement depends on the "
-            f"landmark only through m − t, so H_m = −H_pose[:, :2] (errata 4.2-jac-range, "
+            f"landmark entries are misprinted: {wrong} and d bearing / d y_i (a repeat of the "
+            f"x_i entry). The measurement depends on the landmark only through m − t: compare "
+            f"the landmark columns with the vehicle's x and y columns (errata 4.2-jac-range, "
             f"4.2-jac-bearing).")
+
+
+def _printed_jacobian_answer(alignment: int) -> str:
+    wrong = ("d range / d x_i must be −Δx/Δ (printed −Δy/Δ), d range / d y_i must be −Δy/Δ "
+             "(printed 0)" if alignment == 0 else "d range / d x_i must be −Δx/Δ (printed 0)")
+    return (f"{wrong}, and d bearing / d y_i must be −Δx/Δ² (printed Δy/Δ²): "
+            f"H_m = −H_pose[:, :2].")
 
 
 def _jacobian_variant(change):
@@ -204,21 +211,26 @@ def check_observation_jacobian(fn, *, seed: int = 0, n: int = 60,
              f"(range, bearing), columns the variables (x, y, phi, x_i, y_i).")
     mistakes = [
         Mistake(_printed_jacobian_message(name, 0),
-                lambda p, m: paper.observation_jacobian_printed(p, m, alignment=0)),
+                lambda p, m: paper.observation_jacobian_printed(p, m, alignment=0),
+                answer=_printed_jacobian_answer(0)),
         Mistake(_printed_jacobian_message(name, 1),
-                lambda p, m: paper.observation_jacobian_printed(p, m, alignment=1)),
+                lambda p, m: paper.observation_jacobian_printed(p, m, alignment=1),
+                answer=_printed_jacobian_answer(1)),
         Mistake(f"d bearing / d y_i (entry [1, 4]) of {name} is the paper's misprint "
-                "Δy/Δ² (section 4.2 repeats the x_i entry); it must be −Δx/Δ² with "
-                "Δx = x − x_i, i.e. (x_i − x)/r² (erratum 4.2-jac-bearing). Everything else "
-                "is right.", _jacobian_variant(_printed_bearing_yi)),
+                "(section 4.2 repeats the x_i entry; erratum 4.2-jac-bearing). Everything else "
+                "is right.", _jacobian_variant(_printed_bearing_yi),
+                answer="It must be −Δx/Δ² with Δx = x − x_i, i.e. (x_i − x)/r²."),
         Mistake(f"every position entry of {name} (columns x, y, x_i, y_i) has the wrong "
-                "sign; only d bearing / d phi = −1 is right. The offsets are taken the wrong "
-                "way round: with d = (x_i − x, y_i − y) (landmark minus laser), "
-                "d range / d x = −d_x/r and d range / d x_i = +d_x/r. (The paper's "
-                "Δx = x − x_i is −d_x.)", _jacobian_variant(_flip_positions)),
+                "sign; only d bearing / d phi is right. The offsets are taken the wrong "
+                "way round: which point do you subtract from which? (The paper's "
+                "Δx = x − x_i is the opposite of landmark minus laser.)",
+                _jacobian_variant(_flip_positions),
+                answer="With d = (x_i − x, y_i − y) (landmark minus laser), "
+                       "d range / d x = −d_x/r and d range / d x_i = +d_x/r."),
         Mistake(f"the landmark columns of {name} repeat the vehicle's x and y columns. The "
-                "measurement depends on the landmark only through m − t, so they are their "
-                "NEGATIVES: H_m = −H_pose[:, :2].", _jacobian_variant(_copy_pose_block)),
+                "measurement depends on the landmark only through m − t: how does moving the "
+                "landmark compare with moving the laser?", _jacobian_variant(_copy_pose_block),
+                answer="They are their NEGATIVES: H_m = −H_pose[:, :2]."),
     ]
     return check_jacobian(fn, _reference_jacobian, cases, name=name, rows=("range", "bearing"),
                           cols=_COLS, arg_names=_POSE_LM, mistakes=mistakes,
@@ -261,28 +273,28 @@ def check_inverse_observe(fn, *, seed: int = 0, n: int = 60,
     swapped, the landmark left in the laser frame or relative to the laser.
     """
     cases = _inverse_cases(seed, n)
-    conv = ("the bearing counts from the laser's right (β = π/2 is straight ahead), so the "
-            "world direction of the landmark is φ + β − π/2")
+    conv = ("the bearing counts from the laser's right (β = π/2 is straight ahead): where "
+            "does a landmark at β = π/2 lie for a laser heading φ?")
+    direction = "The world direction of the landmark is φ + β − π/2."
     mistakes = [
         Mistake(f"{name} puts the landmark 90° counter-clockwise of where it is, around the "
-                f"laser: it uses the direction φ + β, but {conv}.",
-                _inverse_variant(lambda phi, b: phi + b)),
-        Mistake(f"{name} puts the landmark on the opposite side of the laser (180° off): it "
-                f"uses φ + β + π/2, but {conv}.",
-                _inverse_variant(lambda phi, b: phi + b + np.pi / 2)),
-        Mistake(f"{name} mirrors the bearing: it uses φ − β + π/2, but the laser's bearing "
-                f"grows counter-clockwise like φ (right 0, ahead π/2, left π): the world "
-                f"direction of the landmark is φ + β − π/2.",
-                _inverse_variant(lambda phi, b: phi - b + np.pi / 2)),
-        Mistake(f"{name} swaps cos and sin: x_i = x + r cos(φ + β − π/2), "
-                "y_i = y + r sin(φ + β − π/2).",
-                _inverse_variant(lambda phi, b: phi + b - np.pi / 2, trig=(np.sin, np.cos))),
+                f"laser: {conv}",
+                _inverse_variant(lambda phi, b: phi + b), answer=direction),
+        Mistake(f"{name} puts the landmark on the opposite side of the laser (180° off): {conv}",
+                _inverse_variant(lambda phi, b: phi + b + np.pi / 2), answer=direction),
+        Mistake(f"{name} mirrors the bearing: the laser's bearing grows counter-clockwise like "
+                f"φ (right 0, ahead π/2, left π).",
+                _inverse_variant(lambda phi, b: phi - b + np.pi / 2), answer=direction),
+        Mistake(f"{name} swaps cos and sin: x_i goes with the cosine of the world direction.",
+                _inverse_variant(lambda phi, b: phi + b - np.pi / 2, trig=(np.sin, np.cos)),
+                answer="x_i = x + r cos(φ + β − π/2), y_i = y + r sin(φ + β − π/2)."),
         Mistake(f"{name} returns the landmark relative to the laser: add the laser's world "
                 "position (x, y).", _inverse_variant(lambda phi, b: phi + b - np.pi / 2,
                                                      offset=False)),
-        Mistake(f"{name} returns the landmark in the laser's frame, (r sin β, −r cos β) plus "
-                "the position: rotate it by the heading φ into the world first "
-                "(m = t + R(φ) p).", _inverse_variant(lambda phi, b: b - np.pi / 2)),
+        Mistake(f"{name} leaves the landmark in the laser's frame (plus the position): it is "
+                "not yet turned into the world's axes by the heading.",
+                _inverse_variant(lambda phi, b: b - np.pi / 2),
+                answer="Rotate the laser-frame point (r sin β, −r cos β) by φ: m = t + R(φ) p."),
     ]
     return check_function(fn, lambda p, z: inverse_observe(p, z)[0], cases, name=name,
                           arg_names=("pose", "z"), labels=("x_i", "y_i"), mistakes=mistakes,
@@ -350,10 +362,11 @@ def check_two_point_frame(fn, *, seed: int = 0, n: int = 60,
     names = ("p_right", "p_left")
     # The printed case list leaves x_l > x_r undefined: NaN, or an exception such as an
     # unassigned theta. Say so before the generic checks (they would blame a division).
-    no_case = ("The paper's case list (section 3.3) has no case for x_l > x_r: its third "
-               "condition repeats the first (X_l < X_r). With the condition read as x_l > x_r "
-               "the cases agree with θ = atan2(y_r − y_l, x_r − x_l), which covers every "
-               "configuration in one line (erratum 3.3-theta-case3).")
+    no_case = Mistake("The paper's case list (section 3.3) has no case for x_l > x_r: its "
+                      "third condition repeats the first (X_l < X_r). One function of the two "
+                      "differences covers every configuration without cases (erratum "
+                      "3.3-theta-case3).", None,
+                      answer="θ = atan2(y_r − y_l, x_r − x_l).").text
     for pr, pl in cases:
         if pl[0] > pr[0]:
             try:
@@ -373,31 +386,33 @@ def check_two_point_frame(fn, *, seed: int = 0, n: int = 60,
                          + no_case)
             break
     mistakes = [
-        Mistake(f"{name} returns the (i, j) printed in section 3.3: i = j = x_l cos θ − "
-                f"y_l sin θ, the same formula twice. The translation of ijT_r is the robot "
-                f"origin seen from the landmark frame, −R(θ)ᵀ (x_l, y_l): "
-                f"i = −(x_l cos θ + y_l sin θ), j = x_l sin θ − y_l cos θ "
-                f"(erratum 3.3-ij).",
+        Mistake(f"{name} returns the (i, j) printed in section 3.3: the same formula twice "
+                f"(erratum 3.3-ij). The translation of ijT_r is the robot origin seen from the "
+                f"landmark frame: the transform must send P_l to (0, 0).",
                 _frame_variant(_theta_right, lambda pr, pl, th:
-                               tuple(paper.two_point_ij_printed(pl, th)))),
+                               tuple(paper.two_point_ij_printed(pl, th))),
+                answer="(i, j) = −R(θ)ᵀ (x_l, y_l): i = −(x_l cos θ + y_l sin θ), "
+                       "j = x_l sin θ − y_l cos θ."),
         Mistake(f"{name} returns θ = −π/2 whenever x_l = x_r, as printed in section 3.3; that "
                 f"is wrong by π when y_r > y_l (the frame's x axis points from P_l to P_r, "
-                f"i.e. up). atan2(y_r − y_l, x_r − x_l) gets both vertical cases right "
-                f"(erratum 3.3-theta-vertical).", _frame_variant(_theta_printed_fixed)),
+                f"i.e. up) (erratum 3.3-theta-vertical).", _frame_variant(_theta_printed_fixed),
+                answer="atan2(y_r − y_l, x_r − x_l) gets both vertical cases right."),
         Mistake(f"{name}'s (i, j) has the wrong sign: the landmark frame's origin P_l must map "
-                f"to (0, 0), so (i, j) = −R(θ)ᵀ (x_l, y_l), the robot origin seen from the "
-                f"landmark frame.",
+                f"to (0, 0).",
                 _frame_variant(_theta_right, lambda pr, pl, th:
                                (pl[0] * math.cos(th) + pl[1] * math.sin(th),
-                                -pl[0] * math.sin(th) + pl[1] * math.cos(th)))),
+                                -pl[0] * math.sin(th) + pl[1] * math.cos(th))),
+                answer="(i, j) = −R(θ)ᵀ (x_l, y_l), the robot origin seen from the landmark frame."),
         Mistake(f"{name} puts the landmark frame's origin at P_r; the paper's formula (and "
-                f"the course) puts it at the LEFT point P_l: (i, j) = −R(θ)ᵀ (x_l, y_l).",
+                f"the course) puts it at the LEFT point P_l.",
                 _frame_variant(_theta_right, lambda pr, pl, th:
                                (-(pr[0] * math.cos(th) + pr[1] * math.sin(th)),
-                                pr[0] * math.sin(th) - pr[1] * math.cos(th)))),
+                                pr[0] * math.sin(th) - pr[1] * math.cos(th))),
+                answer="(i, j) = −R(θ)ᵀ (x_l, y_l)."),
         Mistake(f"{name}'s θ points from P_r to P_l (off by π): the landmark x axis points "
-                f"from the left point to the right one, θ = atan2(y_r − y_l, x_r − x_l).",
-                _frame_variant(lambda pr, pl: math.atan2(pl[1] - pr[1], pl[0] - pr[0]))),
+                f"from the left point to the right one.",
+                _frame_variant(lambda pr, pl: math.atan2(pl[1] - pr[1], pl[0] - pr[0])),
+                answer="θ = atan2(y_r − y_l, x_r − x_l)."),
     ]
     return check_function(fn, lambda pr, pl: landmark_from_two_points(pr, pl)[0], cases,
                           name=name, arg_names=names, labels=("i", "j", "theta"), angles=[2],

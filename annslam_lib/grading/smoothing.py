@@ -77,15 +77,16 @@ def _between_mistakes(name: str) -> list[Mistake]:
 
     return [
         Mistake(f"{name} subtracts poses in the world frame (x_j − x_i − Δ): Δ is measured in "
-                "the frame of pose i, so compare it with X_i⁻¹ X_j, pose j seen from pose i.",
-                world_difference),
+                "the frame of pose i, so it must be compared with pose j as seen from pose i.",
+                world_difference, "Compare Δ with X_i⁻¹ X_j."),
         Mistake(f"{name} returns the coordinates of Δ⁻¹ X_i⁻¹ X_j without the logarithm: the "
-                "error lives in the tangent space, Log(·) = (V(θ)⁻¹ t, θ), eq. (10.4). They "
-                "differ once the rotation is not small.", no_log),
-        Mistake(f"{name} composes the pair the wrong way round (X_j⁻¹ X_i): Δ is pose j in "
-                "the frame of pose i, X_i⁻¹ X_j.", reversed_pair),
-        Mistake(f"{name} has the error's sign flipped (Log((X_i⁻¹ X_j)⁻¹ Δ)): GTSAM's error "
-                "is Log(Δ⁻¹ X_i⁻¹ X_j), prediction against measurement.", delta_after),
+                "error lives in the tangent space, eq. (10.4). They differ once the rotation "
+                "is not small.", no_log, "Log(·) = (V(θ)⁻¹ t, θ)."),
+        Mistake(f"{name} composes the pair the wrong way round: Δ is pose j in the frame of "
+                "pose i.", reversed_pair, "X_i⁻¹ X_j, not X_j⁻¹ X_i."),
+        Mistake(f"{name} has the error's sign flipped: GTSAM's error is the prediction "
+                "against the measurement (eq. (10.4)).", delta_after,
+                "Log(Δ⁻¹ X_i⁻¹ X_j), not Log((X_i⁻¹ X_j)⁻¹ Δ)."),
     ]
 
 
@@ -150,16 +151,18 @@ def _br_mistakes(name: str) -> list[Mistake]:
         return np.array([float(wrap_angle(zhat[1] - math.pi / 2 - z[1])), zhat[0] - z[0]])
 
     return [
-        Mistake(f"{name} returns (range, bearing): GTSAM's BearingRange puts the bearing "
-                "first, and its noise model is ordered the same way (σ_β, σ_r).", range_first),
-        Mistake(f"{name} returns measured − predicted: a factor's error is h(x) ⊖ z, the "
-                "prediction against the measurement.", measured_minus_predicted),
+        Mistake(f"{name} returns (range, bearing): GTSAM's BearingRange has its own order, "
+                "and its noise model is ordered the same way.", range_first,
+                "The bearing comes first: (σ_β, σ_r), e = (wrap(β̂ − β), r̂ − r)."),
+        Mistake(f"{name} returns measured − predicted: a factor's error has the other sign.",
+                measured_minus_predicted, "h(x) ⊖ z, the prediction against the measurement."),
         Mistake(f"{name} does not wrap the bearing error: a landmark predicted just below +π "
-                "and measured just above −π is 0.007 rad off, not almost 2π.", unwrapped),
+                "and measured just above −π is 0.007 rad off, not almost 2π.", unwrapped,
+                "Wrap β̂ − β into (−π, π]."),
         Mistake(f"{name} compares GTSAM's bearing (from the pose's x axis) with the laser's "
-                "(0 to the right, π/2 ahead): measure both in one convention; the difference "
-                "of two laser bearings is the same as of two GTSAM bearings.",
-                gtsam_bearing_vs_laser),
+                "(0 to the right, π/2 ahead): measure both in one convention.",
+                gtsam_bearing_vs_laser,
+                "The difference of two laser bearings is the same as of two GTSAM bearings."),
     ]
 
 
@@ -212,12 +215,13 @@ def _t_mistakes(name: str) -> list[Mistake]:
     untouched, transposed, position_only = flat(untouched), flat(transposed), flat(position_only)
     return [
         Mistake(f"{name} returns GTSAM's covariance as it is: its position part is in the "
-                "pose's own (body) frame; the filter's is in the world frame. Rotate by "
-                "B = blockdiag(R(φ), 1): B S Bᵀ.", untouched),
-        Mistake(f"{name} rotates the wrong way (R(φ)ᵀ, world to body): GTSAM's covariance is "
-                "in the body frame, so R(φ) takes it to the world.", transposed),
+                "pose's own (body) frame; the filter's is in the world frame.", untouched,
+                "Rotate by B = blockdiag(R(φ), 1): B S Bᵀ."),
+        Mistake(f"{name} rotates the wrong way (world to body): GTSAM's covariance is in the "
+                "body frame.", transposed, "R(φ), not R(φ)ᵀ, takes it to the world."),
         Mistake(f"{name} rotates only the 2 × 2 position block: the position-heading "
-                "covariances (the third row and column) turn with it.", position_only),
+                "covariances (the third row and column) turn with it.", position_only,
+                "B S Bᵀ with B = blockdiag(R(φ), 1)."),
     ]
 
 

@@ -141,22 +141,25 @@ def check_rigid_align(fn: Callable, *, seed: int = 0, n: int = 6, quiet: bool = 
         what="evaluation.map.rigid_align",
         mistakes=[
             Mistake(f"{name} returns a REFLECTION (det R = -1) where a mirror image fits better: "
-                    "R = V U^T must be corrected to V diag(1, det(V U^T)) U^T. A map may be "
-                    "rotated and shifted into the survey's frame, never mirrored.",
-                    _wrong_rt_packed("reflection")),
+                    "step 3 of the algorithm is there to prevent it. A map may be rotated and "
+                    "shifted into the survey's frame, never mirrored.",
+                    _wrong_rt_packed("reflection"),
+                    "R = V U^T must be corrected to V diag(1, det(V U^T)) U^T."),
             Mistake(f"{name} includes a SCALE factor in R (Umeyama's similarity): the rigid "
                     "alignment is a rotation and a translation only; a map's size is part of "
                     "its error, not of its frame.", _wrong_rt_packed("scale")),
-            Mistake(f"{name} returns R transposed (the rotation the other way): with "
-                    "C = sum (a_i - a_bar)(b_i - b_bar)^T = U S V^T, R = V diag(1, d) U^T, not "
-                    "U diag(1, d) V^T.", _wrong_rt_packed("transposed")),
+            Mistake(f"{name} returns R transposed (the rotation the other way): check which of "
+                    "the SVD's factors goes on which side.", _wrong_rt_packed("transposed"),
+                    "With C = sum (a_i - a_bar)(b_i - b_bar)^T = U S V^T, R = V diag(1, d) U^T, "
+                    "not U diag(1, d) V^T."),
             Mistake(f"{name} aligns b onto a (the true landmarks onto the map); the map a is "
-                    "the one to move: R a_i + t ~ b_i.", _wrong_rt_packed("reversed")),
-            Mistake(f"{name} forgets the centroids: subtract a_bar and b_bar before forming "
-                    "the cross-covariance C = sum (a_i - a_bar)(b_i - b_bar)^T.",
-                    _wrong_rt_packed("uncentred")),
-            Mistake(f"{name} has the right R but t = b_bar - a_bar; the translation moves the "
-                    "ROTATED centroid: t = b_bar - R a_bar.", _wrong_rt_packed("no_rotation_in_t")),
+                    "the one to move.", _wrong_rt_packed("reversed"), "R a_i + t ~ b_i."),
+            Mistake(f"{name} forgets the centroids when forming the cross-covariance (step 1).",
+                    _wrong_rt_packed("uncentred"),
+                    "C = sum (a_i - a_bar)(b_i - b_bar)^T."),
+            Mistake(f"{name} has the right R but the wrong translation: the translation moves "
+                    "the ROTATED centroid.", _wrong_rt_packed("no_rotation_in_t"),
+                    "t = b_bar - R a_bar."),
         ])
     ok = msg_ok.replace(" inputs.", " inputs (a near-180° rotation, 2 points, collinear, "
                                    "mirrored and shrunken maps included).")
@@ -183,39 +186,47 @@ def _wrong_rmse(kind: str):
     return f
 
 
-@forbids(aligned_rmse, map_errors)
+_E_MIN = ("With the centred points a_i', b_i' and the singular values s_1, s_2 of "
+          "C = sum a_i' b_i'^T: E_min = sum |a_i'|^2 + sum |b_i'|^2 - 2 (s_1 + d s_2), "
+          "d = sign det(V U^T), and the aligned RMSE is sqrt(E_min / K).")
+
+
+@forbids(aligned_rmse, map_errors, rigid_align)
 def check_aligned_rmse(fn: Callable, *, seed: int = 0, n: int = 6, quiet: bool = False) -> str:
     """Exercise 8.2 (notebook 08, section 4): ``fn(mapped, true)`` returns the map RMSE after
-    the best rigid alignment (:func:`aligned_rmse`) for paired landmarks, and raises
-    ValueError for fewer than 2 pairs."""
+    the best rigid alignment (:func:`aligned_rmse`) for paired landmarks, from the singular
+    values of the cross-covariance (the exercise derives the minimum; ``rigid_align`` is
+    forbidden), and raises ValueError for fewer than 2 pairs."""
     name = getattr(fn, "__name__", "my_aligned_rmse")
     msg_ok = check_function(
         _copying(fn), aligned_rmse, _pairs(seed, n), name=name, arg_names=["mapped", "true"],
         atol=1e-9, rtol=1e-7, quiet=True, what="the aligned map RMSE (evaluation.map)",
         mistakes=[
             Mistake(f"{name} returns the RMSE WITHOUT the alignment (the absolute error, "
-                    "reproduce's map_rmse): apply R, t = rigid_align(mapped, true) to the "
-                    "mapped landmarks first.", _wrong_rmse("absolute")),
-            Mistake(f"{name} only shifts the centroids together; the alignment also rotates: "
-                    "R, t = rigid_align(mapped, true).", _wrong_rmse("centroid")),
+                    "reproduce's map_rmse): the map's frame is still in it.",
+                    _wrong_rmse("absolute"), _E_MIN),
+            Mistake(f"{name} only removes the translation; the best alignment also rotates: "
+                    "the cross term must be taken at the best rotation.",
+                    _wrong_rmse("centroid"), _E_MIN),
             Mistake(f"{name} returns the MEAN distance; the RMSE is the root of the mean "
-                    "SQUARED distance, sqrt(mean(|e_i|^2)), which weighs large errors more.",
-                    _wrong_rmse("mean")),
+                    "SQUARED distance, which weighs large errors more.", _wrong_rmse("mean"),
+                    "sqrt(mean(|e_i|^2)) = sqrt(E_min / K)."),
             Mistake(f"{name} averages the squared errors over the 2K coordinates (a factor "
                     "1/sqrt(2) too small); the map RMSE averages the squared Euclidean "
-                    "distances over the K landmarks: sqrt(mean(dx^2 + dy^2)).",
-                    _wrong_rmse("coords")),
+                    "distances over the K landmarks.", _wrong_rmse("coords"),
+                    "sqrt(E_min / K), not sqrt(E_min / (2 K))."),
             Mistake(f"{name} returns the mean squared error (m^2): take its square root.",
                     _wrong_rmse("mse")),
-            Mistake(f"{name} applies R transposed: for points stored as rows a (K, 2) the "
-                    "rotated points are a @ R.T (R a_i for every row), then + t.",
-                    _wrong_rmse("transposed")),
+            Mistake(f"{name} rotates with R transposed (the rotation the other way): for points "
+                    "stored as rows, check on which side R multiplies.",
+                    _wrong_rmse("transposed"), "The rotated points are a @ R.T (R a_i for "
+                    "every row), then + t."),
             Mistake(f"{name} lets the alignment mirror the map (det R = -1), which hides a "
-                    "real error; use the rotation of evaluation.map.rigid_align.",
-                    _wrong_rmse("reflection")),
+                    "real error: look at the sign d of step 3.", _wrong_rmse("reflection"),
+                    "Subtract 2 (s_1 + d s_2) with d = sign det(V U^T), not 2 (s_1 + s_2)."),
             Mistake(f"{name} lets the alignment scale the map, which hides a real error (a "
                     "map that is too small); rotation and translation only.",
-                    _wrong_rmse("scale")),
+                    _wrong_rmse("scale"), _E_MIN),
         ])
     check_raises(fn, (np.array([[1.0, 2.0]]), np.array([[0.0, 1.0]])), name=name,
                  arg_names=["mapped", "true"],
@@ -280,13 +291,17 @@ def check_regression(fn: Callable, *, seed: int = 0, n: int = 6, quiet: bool = F
         mistakes=[
             Mistake(f"{name} returns R^2 (the coefficient of determination) as R; nntool's "
                     "regression plot shows R, the correlation coefficient, which is negative "
-                    "when the outputs go the wrong way.", _wrong_reg("r2")),
-            Mistake(f"{name} fits the line the wrong way round (targets on outputs): nntool "
-                    "fits Output = slope * Target + intercept, targets on the x-axis.",
-                    _wrong_reg("swapped")),
-            Mistake(f"{name} uses the x coordinates only; nntool pools every output value: "
-                    "flatten both (n, 2) arrays (.ravel()) first.", _wrong_reg("x_only")),
+                    "when the outputs go the wrong way.", _wrong_reg("r2"),
+                    "R = S_go / sqrt(S_gg S_oo), with the sign of the slope."),
+            Mistake(f"{name} fits the line the wrong way round (targets on outputs): which "
+                    "distances does nntool's line minimise, and which variable is on the "
+                    "x-axis?", _wrong_reg("swapped"),
+                    "Output = slope * Target + intercept: slope = S_go / S_gg, "
+                    "intercept = o_bar - slope g_bar."),
+            Mistake(f"{name} uses the x coordinates only; nntool pools every output value.",
+                    _wrong_reg("x_only"), "Flatten both (n, 2) arrays (.ravel()) first."),
             Mistake(f"{name}'s R is n / (n - 1) times too large: the covariance and the "
-                    "standard deviations must use the same normalisation (np.cov has "
-                    "ddof=1, np.std ddof=0); np.corrcoef avoids the issue.", _wrong_reg("ddof")),
+                    "standard deviations must use the same normalisation.", _wrong_reg("ddof"),
+                    "np.cov has ddof=1, np.std ddof=0; R = S_go / sqrt(S_gg S_oo) avoids "
+                    "the issue."),
         ])

@@ -79,9 +79,39 @@ def laser_pose(axle_pose, vehicle: Vehicle):
 
 
 def axle_pose(laser_pose, vehicle: Vehicle):
-    """Rear-axle pose from the laser pose: the inverse of :func:`laser_pose`.
+    """Rear-axle pose from the laser pose: the inverse of :func:`laser_pose` (notebook 02,
+    exercise 2.1).
 
-    Returns (pose (..., 3), J (..., 3, 3))."""
+    The heading is shared by the two points, so the laser pose already holds the phi that
+    turns the lever arm, and the lever arm is taken off again:
+
+        P_c = P_l - R(phi) (a, b) = P_l - a T(phi) - b T(phi + pi/2),
+
+    the paper's section 4.1 P_l equation solved for P_c.
+
+    Parameters
+    ----------
+    laser_pose : array_like, shape (..., 3)
+        Laser pose (x_l, y_l, phi) (m, m, rad), any leading (batch) dimensions.
+    vehicle : Vehicle
+        The car; its ``a`` (laser ahead of C) and ``b`` (to the left) are used.
+
+    Returns
+    -------
+    pose : ndarray, shape (..., 3)
+        Rear-axle pose (x_c, y_c, phi), the heading passed through unchanged.
+    J : ndarray, shape (..., 3, 3)
+        d pose / d laser_pose: the identity with the heading column
+        (a sin(phi) + b cos(phi), -a cos(phi) + b sin(phi), 1), the inverse of the
+        Jacobian of :func:`laser_pose`.
+
+    Raises
+    ------
+    TypeError
+        If ``laser_pose`` is not numeric or ``vehicle`` is not a :class:`Vehicle`.
+    ValueError
+        If the last dimension of ``laser_pose`` is not 3, or it is not finite.
+    """
     veh = _checks.instance("vehicle", vehicle, Vehicle)
     p = _checks.array("laser_pose", laser_pose, (3,))
     c, s = np.cos(p[..., 2]), np.sin(p[..., 2])
