@@ -15,4 +15,19 @@ with an ANN landmark model. Folders are layers, bottom to top:
 
 Importing this package imports nothing heavy: each layer loads when it is used.
 """
-__version__ = "0.1.0"
+
+
+def __getattr__(name: str):
+    """``__version__``: the installed distribution's version, read from its metadata the first
+    time it is asked for. Its one source is ``version`` in pyproject.toml's ``[project]``
+    (CITATION.cff and CHANGELOG.md repeat it; tests/test_version.py checks they agree)."""
+    if name == "__version__":
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            value = version("annslam")
+        except PackageNotFoundError:      # the folder put on sys.path, never installed
+            value = "0+unknown"
+        globals()["__version__"] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

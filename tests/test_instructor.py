@@ -1,6 +1,7 @@
-"""INSTRUCTOR.md (issue 24) against the notebooks it describes: its pacing table is the one
-`python -m annslam_lib pacing` computes, every chapter has its prerequisites, every ungraded
-exercise its rubric, its links resolve, and the README's first screen links it."""
+"""INSTRUCTOR.md against the notebooks it describes: its pacing table is the one
+`python -m annslam_lib pacing` computes and its exercises table the one `python -m annslam_lib
+exercises` prints, every chapter has its prerequisites and its row in the chapter map, every
+ungraded exercise its rubric, its links resolve, and the README's first screen links it."""
 import re
 from pathlib import Path
 
@@ -16,6 +17,27 @@ def test_the_pacing_table_is_computed_from_the_notebooks():
     assert m, "INSTRUCTOR.md has no pacing table between its markers"
     assert m.group(1).strip() == pacing.pacing_table(NOTEBOOKS).strip(), (
         "INSTRUCTOR.md's pacing table is stale: paste the output of `python -m annslam_lib pacing`")
+
+
+def test_the_exercise_table_is_the_notebooks_table():
+    from annslam_lib.course.release import exercise_table
+
+    block = re.search(r"<!-- exercises:begin -->\n(.*?)\n?<!-- exercises:end -->", GUIDE, re.S)
+    assert block, "INSTRUCTOR.md lost its exercises markers"
+    assert block.group(1).strip() == exercise_table(NOTEBOOKS).strip(), (
+        "INSTRUCTOR.md's exercise table is stale: paste the output of "
+        "`python -m annslam_lib exercises`")
+
+
+def test_the_chapter_map_links_every_notebook():
+    chapter_map = GUIDE.split("## What each chapter does", 1)[1].split("\n## ", 1)[0]
+    linked = sorted(set(re.findall(r"\(notebooks/([0-9]{2}[a-z]?_[a-z_0-9]+\.ipynb)\)", chapter_map)))
+    assert linked == [nb.name for nb in NOTEBOOKS], "INSTRUCTOR.md's chapter map differs from notebooks/"
+
+
+def test_the_guide_stands_alone():
+    """Everything an instructor needs is here: no section of the README is sent for."""
+    assert "README.md#" not in GUIDE and "the README's" not in GUIDE
 
 
 def test_every_chapter_has_its_prerequisites_and_every_ungraded_exercise_a_rubric():

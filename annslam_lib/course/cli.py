@@ -14,6 +14,7 @@
     python -m annslam_lib running --root DIR                       is a course server open on DIR?
     python -m annslam_lib hub --class FILE [--port P]              a JupyterHub for a class (root)
     python -m annslam_lib class release|collect|grade|feedback CH  the instructor's steps on it
+    python -m annslam_lib --version                                the course's version
 
 Each command is a sub-parser added by an ``_add_<command>`` function that sets ``func``;
 ``main`` returns the exit code.
@@ -24,6 +25,7 @@ import argparse
 import json
 import sys
 
+from .. import __version__
 from ..data import fetch
 from ..data import registry
 from ..data.fetch import DataError
@@ -496,6 +498,8 @@ def _add_singleuser(sub) -> None:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m annslam_lib",
                                      description="annslam course library: data and tools.")
+    parser.add_argument("--version", action="version", version=f"annslam {__version__}",
+                        help="print the course's version (pyproject.toml, CHANGELOG.md) and exit")
     sub = parser.add_subparsers(dest="command", required=True, metavar="command")
     _add_data(sub)
     _add_errata(sub)
