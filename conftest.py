@@ -160,8 +160,8 @@ def _compile_library(config) -> None:
 def _own_study_cache(config) -> None:
     """One study cache for this test session (annslam_lib._cache), made here in the main
     process and inherited by the workers and every kernel they start: each cached study is
-    computed at least once per session (never read from an earlier session's code), and the
-    second notebook run that needs it (nbval's, the browser's) reads it back."""
+    computed at least once per test session (never read from an earlier test session's
+    code), and the second notebook run that needs it (nbval's, the browser's) reads it back."""
     if hasattr(config, "workerinput") or os.environ.get("ANNSLAM_CACHE"):
         return
     folder = tempfile.mkdtemp(prefix="annslam-study-cache-")

@@ -8,7 +8,7 @@
 #   ./course.sh refresh [NB...]     re-execute notebooks in place (instructors)
 #   ./course.sh release [...]       write the student versions (no solutions, no hidden tests)
 #   ./course.sh grade SUB...        grade submitted notebooks (instructors)
-#   ./course.sh hub --class FILE [--port P]   a JupyterHub for a class, as root (README)
+#   ./course.sh hub --class FILE [--port P]   a JupyterHub for a class, as root (INSTRUCTOR.md)
 #   ./course.sh class ACTION CHAPTER          release|collect|grade|feedback on that hub
 #
 # `test` also installs environment-instructor.txt (nbgrader, playwright, ...).

@@ -1,5 +1,5 @@
 """A study computed once per machine: results of the course's heavy experiments, kept in the
-user cache and checked on load (issue 23: a class's Run All is CPU seconds per student).
+user cache and checked on load (a class's Run All costs CPU seconds per student).
 
 :func:`memoize` wraps a deterministic library function (a Monte Carlo study, a grid of
 trained networks). A call's key is the SHA-256 of

@@ -20,7 +20,8 @@ second Run All on a laptop reads its own cache and costs the same). ``--against 
 out into a temporary worktree; its kernel imports that library first), one notebook after
 the other, alternating, so that both see the same machine; the table then gives the ratio
 current / REF. Prints figures only: a timing depends on the machine and its load (run it
-alone). Targets (issue 23): Run All <= 20 s CPU, widget step <= 0.25 s.
+alone). Targets (a class's Run All costs CPU seconds per student): Run All <= 20 s CPU,
+widget step <= 0.25 s.
 """
 from __future__ import annotations
 
@@ -226,8 +227,8 @@ def _print_summary(results: dict) -> None:
           f"{', '.join(over) or 'none'}")
     warm = {k: r["warm"] for k, r in results.items() if "warm" in r}
     if warm:
-        # what the issue's target is judged on where a notebook runs its heavy studies from
-        # the study cache, computed once per machine (issue 23, "What to build")
+        # what the Run All target is judged on where a notebook runs its heavy studies from
+        # the study cache, computed once per machine (annslam_lib._cache)
         over_w = [k for k, r in warm.items() if r["cpu"] > RUN_ALL_TARGET]
         print(f"Run All with the class's studies: {len(warm)} runs, largest "
               f"{max(r['cpu'] for r in warm.values()):.1f} s; over {RUN_ALL_TARGET:.0f} s: "

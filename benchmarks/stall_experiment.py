@@ -18,7 +18,7 @@ without an error; ``--client course`` is the fix. When a stall is in progress, t
 written to a file in ``$ANNSLAM_STALL_DIAG`` (default: the temporary folder).
 
 Prints one line per notebook and a summary (stalls per sequence); exits 1 if any stall.
-Not a test: it takes minutes and measures the machine. Issue 19 keeps its figures.
+Not a test: it takes minutes and measures the machine.
 """
 from __future__ import annotations
 
@@ -148,7 +148,7 @@ def main(argv=None) -> int:
     ap.add_argument("--versions", default="instructor,student")
     ap.add_argument("--client", default="course", choices=["course", "plain"],
                     help="course: annslam_lib.course.kernels.CourseNotebookClient (the fix); "
-                         "plain: nbclient's NotebookClient as it comes (before the fix)")
+                         "plain: nbclient's NotebookClient as it comes (without the fix)")
     ap.add_argument("--json", help="write every record here")
     args = ap.parse_args(argv)
 

@@ -14,7 +14,7 @@ process and the notebook kernels it starts:
 ``avx2`` is a Haswell-class machine (no AVX-512), ``sse`` a generic x86-64 core (OpenBLAS's
 Prescott kernels, NumPy's baseline, PyTorch's default kernels). Each profile runs with each
 worker count; prints one line per run (passed, failed, seconds) and exits 1 if any failed.
-Not a test: it takes several minutes per run. Issue 19 keeps its figures.
+Not a test: it takes several minutes per run.
 """
 from __future__ import annotations
 

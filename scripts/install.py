@@ -45,7 +45,7 @@ TORCH_CPU = f"{TORCH_VERSION}+cpu"
 TORCH_INDEX_ENV = "ANNSLAM_TORCH_INDEX"
 TORCH_INDEX_DEFAULT = "https://download.pytorch.org/whl/cpu"
 #: Interpreters the course supports (environment.txt's pins have wheels for them). 3.11 is
-#: the one tested end to end; README "The two commands" states what is tested for the others.
+#: the one tested end to end; INSTRUCTOR.md "Python versions" states what is tested for the others.
 SUPPORTED = ((3, 11), (3, 12), (3, 13))
 PROBE_TIMEOUT_S = 15
 STAMP_PREFIX = ".annslam-installed-"

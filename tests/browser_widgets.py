@@ -21,8 +21,8 @@ without Playwright or Chromium (as tests/test_browser.py).
 
 The whole student version's Run All (only the exercises raise) is checked with nbclient by
 tests/test_student_run.py: JupyterLab's Run All executes the same cells in the same kernel,
-and rendering a whole chapter in Chromium cost 30-45 s of CPU per chapter beyond the kernel's
-(chapter 05: 64 CPU-s in the browser against 17 with nbclient, measured 2026-12-03).
+and rendering a whole chapter in Chromium costs several times nbclient's CPU (tens of
+seconds per chapter beyond the kernel's).
 """
 import contextlib
 import io

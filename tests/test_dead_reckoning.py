@@ -257,9 +257,9 @@ def _moved_first_fix(gps, dx):
 
 
 def test_robust_fit_leaves_out_a_wrong_first_fix(car_park):
-    """Issue 13 finding 4: a first fix 500 m off was trusted as the start. Now it is left
-    out (counted) and the start comes from the first fix kept: the clean fit's start to
-    within the car's motion between the two fixes."""
+    """A first fix 500 m off must not be trusted as the start: it is left out (counted)
+    and the start comes from the first fix kept: the clean fit's start to within the car's
+    motion between the two fixes."""
     odo, gps, veh = car_park.odometry, car_park.gps, car_park.vehicle
     clean = dead_reckoning.initial_pose_from_gps(odo, gps, veh, window=10.0)
     assert clean.rejected == 0

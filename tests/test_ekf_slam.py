@@ -419,9 +419,8 @@ BAD_CALLS = [
 
 @pytest.mark.parametrize("what, call, error, match", BAD_CALLS, ids=[b[0] for b in BAD_CALLS])
 def test_bad_arguments_raise_and_leave_the_filter_unchanged(what, call, error, match):
-    """Finding 5 of the science review: each of these used to be accepted (remove([-1])
-    silently deleted the pose's y and phi). Both backends refuse it the same way, and the
-    state is untouched."""
+    """Each of these is refused, not silently accepted (remove([-1]) would delete the
+    pose's y and phi). Both backends refuse it the same way, and the state is untouched."""
     for f in _filter_with_landmarks():
         x, P = (a.copy() for a in f.state())
         with pytest.raises(error, match=match):

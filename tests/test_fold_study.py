@@ -1,6 +1,8 @@
-"""The ANN verdict over folds of the data (issue 21; paper.study.fold_study, ann.time_folds,
+"""The ANN verdict over folds of the data (paper.study.fold_study, ann.time_folds,
 notebook 08 section 4): the folds are what they claim, the sign-flip p-value agrees with
-SciPy's permutation test, and a stored fold value is what a direct run gives."""
+SciPy's permutation test, a stored fold value is what a direct run gives, and the verdict's
+fold rows are the corrected interval and equivalence test of FOLD_RULE on the study's own
+fold sizes (the statistics themselves: test_verdict_stats.py)."""
 import dataclasses
 import itertools
 
@@ -117,14 +119,39 @@ def test_fold_study_values_are_what_direct_runs_give(car_park):
     e = plain.landmarks[i_m[sel]] - car_park.beacons[j_t[sel]]
     assert fs.values["beacons"]["map_rmse"][k, 0] == pytest.approx(
         np.sqrt(np.mean(np.sum(e ** 2, axis=1))), rel=1e-9)
-    # the verdict's fold rows say what the fold differences say
+    # the fold sizes are the folds' own: held out and trained on (train + early stopping)
+    tf, bf = ann.time_folds(ts, 5, gap=2.0, seed=fs.seeds[0]), ann.beacon_folds(ts, 5)
+    assert fs.n_test["time"].tolist() == [f.test.size for f in tf]
+    assert fs.n_train["time"].tolist() == [f.train.size + f.val.size for f in tf]
+    assert fs.n_test["beacons"].tolist() == [f.test.size for f in bf]
+    assert all(fs.n_test["beacons"] + fs.n_train["beacons"] == len(ts))
+    # the verdict's fold rows say what the fold differences say: the interval corrected
+    # by Nadeau and Bengio with those sizes, wider than the one that treats folds as independent
     d = fs.per_fold("ann", "traj_rmse") - fs.per_fold("beacons", "traj_rmse")
-    half = stats.t.ppf(0.975, 4) * d.std(ddof=1) / np.sqrt(5)
-    p = fs.paired("ann", "beacons", "traj_rmse")
-    assert (p.lo, p.hi) == pytest.approx((d.mean() - half, d.mean() + half), abs=1e-12)
-    assert fs.p_value("ann", "beacons", "traj_rmse") == pytest.approx(
-        np.mean([abs(np.dot(s, d)) >= abs(d.sum()) * (1 - 1e-12)
-                 for s in itertools.product((1, -1), repeat=5)]))
+    ratio = np.mean([f.test.size for f in tf]) / np.mean([f.train.size + f.val.size for f in tf])
+    assert 0.2 < ratio < 0.3 and fs.test_train_ratio("traj_rmse") == pytest.approx(ratio)
+    half = stats.t.ppf(0.975, 4) * d.std(ddof=1) * np.sqrt(1 / 5 + ratio)
+    c = fs.compare("ann", "beacons", "traj_rmse")
+    assert (c.lo, c.hi) == pytest.approx((d.mean() - half, d.mean() + half), abs=1e-12)
+    old = stats.t.ppf(0.975, 4) * d.std(ddof=1) / np.sqrt(5)
+    assert (c.lo_naive, c.hi_naive) == pytest.approx((d.mean() - old, d.mean() + old), abs=1e-12)
+    assert c.hi - c.lo > c.hi_naive - c.lo_naive
+    margin = 0.1 * fs.per_fold("beacons", "traj_rmse").mean()
+    assert c.margin == pytest.approx(margin, rel=1e-12)
+    se = d.std(ddof=1) * np.sqrt(1 / 5 + ratio)
+    assert c.p_equivalence == pytest.approx(max(stats.t.sf((d.mean() + margin) / se, 4),
+                                                stats.t.cdf((d.mean() - margin) / se, 4)))
+    flip = np.mean([abs(np.dot(s, d)) >= abs(d.sum()) * (1 - 1e-12)
+                    for s in itertools.product((1, -1), repeat=5)])
+    assert fs.p_value("ann", "beacons", "traj_rmse") == pytest.approx(flip)
+    assert c.p_sign_flip == pytest.approx(flip)
+    # another comparator's per-fold values (the natural-feature filter's) by the same rule
+    nat = np.full(5, 0.08)
+    cn = fs.compare("ann", "natural", "traj_rmse", b_values=nat)
+    assert cn.margin == pytest.approx(0.008) and cn.mean == pytest.approx(
+        fs.per_fold("ann", "traj_rmse").mean() - 0.08)
+    with pytest.raises(ValueError, match="b_values"):
+        fs.compare("ann", "natural", "traj_rmse", b_values=np.ones(4))
 
 
 def test_verdict_rows_come_from_the_folds_or_are_not_counted(car_park):
@@ -138,8 +165,38 @@ def test_verdict_rows_come_from_the_folds_or_are_not_counted(car_park):
         r = with_folds[c]
         mt = {"trajectory": "traj_rmse", "map vs": "map_rmse", "map shape": "map_rmse_aligned"}[
             next(k for k in ("trajectory", "map vs", "map shape") if k in c)]
-        both = all(fs.paired("ann", o, mt).decision == "better" for o in ("beacons", "control"))
-        assert r["holds"] is both
-        assert fs.paired("ann", "beacons", mt).text() in r["measured"]
+        cb, cc = fs.compare("ann", "beacons", mt), fs.compare("ann", "control", mt)
+        assert r["verdict"] == study.fold_claim(cb, cc)
+        assert r["holds"] is {"holds": True, "does not hold": False, "not demonstrated": None}[
+            r["verdict"]]
+        assert cb.text() in r["measured"] and cc.text() in r["measured"]
+        assert cb.decision in r["why"] and cc.decision in r["why"]
     seed_rows = [r for c, r in without.items() if "held-out" in c]
     assert len(seed_rows) == 3 and all(r["holds"] is None for r in seed_rows)
+    assert not any("verdict" in r for r in without.values())
+    # the chapter's table words every row by its verdict
+    from annslam_lib.chapters import ch08_verdict as chapter
+    table = chapter.verdict_table(list(with_folds.values())).splitlines()[2:]
+    for line, r in zip(table, with_folds.values()):
+        assert line.split(" | ")[2] == chapter.VERDICT_WORDS[chapter.verdict_word(r)]
+    assert chapter.verdict_word(dict(claim="x", holds=None)) == "not testable this way"
+    with pytest.raises(ValueError, match="unknown verdict"):
+        chapter.verdict_word(dict(claim="x", holds=None, verdict="no detectable difference"))
+
+
+def test_simulator_rows_are_worded_by_what_was_shown(car_park):
+    """A transfer row holds if better, does not hold if worse, is not demonstrated
+    otherwise (no margin, so no detectable difference is not 'does not hold')."""
+    def tr(plain, ann_):
+        plain, ann_ = np.asarray(plain), np.asarray(ann_)
+        z = np.zeros(plain.size, dtype=int)
+        return study.Transfer(error={}, train_route="loop", test_route="loop", seeds=(1, 2, 3),
+                              plain=plain, ann=ann_, plain_missed=z, ann_missed=z,
+                              plain_spurious=z, ann_spurious=z)
+    rows = study.verdict(study.study(car_park, seeds=5),
+                         {"a": tr([0.3, 0.3, 0.3], [0.1, 0.11, 0.12]),
+                          "b": tr([0.1, 0.1, 0.1], [0.3, 0.31, 0.32]),
+                          "c": tr([0.1, 0.2, 0.1], [0.2, 0.1, 0.12])})
+    got = {r["claim"][-2]: (r["verdict"], r["holds"]) for r in rows if "simulator" in r["claim"]}
+    assert got == {"a": ("holds", True), "b": ("does not hold", False),
+                   "c": ("not demonstrated", None)}

@@ -1,4 +1,4 @@
-"""Copied-code flags in the course's grader (issue 24): `grade_batch` compares each
+"""Copied-code flags in the course's grader: `grade_batch` compares each
 solution with the library's implementation of the function its exercise asks for and with
 the other submissions of the batch, reports near-identical pairs in the text report and the
 JSON, and changes no score. Run on the two-exercise notebook of tests/grading_support.py:
@@ -107,3 +107,34 @@ def test_the_grade_command_prints_and_writes_the_flags(batch):
                      r"\.axle_speed", out.stdout), out.stdout[-1500:]
     rows = {r["student"]: r for r in json.loads((root / "cli.json").read_text())}
     assert {f["other"] for f in rows["bob"]["flags"]} == {"ann"}
+
+
+def test_only_the_instructor_s_skip_tag_leaves_a_course_cell_out_of_the_grade():
+    """A course cell the instructor tagged ``grading-skip`` is not planned; the same tag in a
+    submission changes nothing (a student cannot drop the instructor's cells, nor a test)."""
+    import nbformat
+    from annslam_lib.course import plan as gp
+
+    def nb(tag_study, tag_test=False):
+        v4 = nbformat.v4
+        cells = [v4.new_code_cell("import math"),
+                 v4.new_code_cell("study = sum(range(10))"),
+                 v4.new_code_cell("def f(x):\n    return x", metadata={"nbgrader": {
+                     "grade_id": "ex-f", "solution": True, "grade": False, "locked": False,
+                     "schema_version": 3}}),
+                 v4.new_code_cell("assert f(1) == 1", metadata={"nbgrader": {
+                     "grade_id": "ex-f-tests", "solution": False, "grade": True, "locked": True,
+                     "points": 1, "schema_version": 3}})]
+        if tag_study:
+            cells[1].metadata["tags"] = [gp.SKIP_TAG]
+        if tag_test:
+            cells[0].metadata["tags"] = [gp.SKIP_TAG]
+            cells[3].metadata["tags"] = [gp.SKIP_TAG]
+        return v4.new_notebook(cells=cells)
+
+    planned = gp.plan(nb(tag_study=True), nb(tag_study=False))
+    assert [c.index for c in planned.cells] == [0, 2, 3]
+    assert [c.role for c in planned.cells] == ["course", "solution", "test"]
+    kept = gp.plan(nb(tag_study=False), nb(tag_study=True, tag_test=True))
+    assert [c.index for c in kept.cells] == [0, 1, 2, 3]
+    assert kept.cells[3].role == "test"

@@ -78,7 +78,7 @@ def test_nbgrader_autograde_and_the_course_grader_agree(tmp_path):
     mark = tmp_path / "clients.txt"
     env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}",
            "PYTHONPATH": str(Path(__file__).parent), "ANNSLAM_CLIENT_MARK": str(mark)}
-    # the README's one line that gives nbgrader's autograde the course's stall-proof client
+    # INSTRUCTOR.md's one line that gives nbgrader's autograde the course's stall-proof client
     (course / "nbgrader_config.py").write_text(
         'c = get_config()  # noqa: F821\n'
         'c.AsyncKernelManager.client_class = "grading_support.MarkedKernelClient"\n')

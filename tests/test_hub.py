@@ -1,4 +1,4 @@
-"""The class hub for real (issue 20): ``python -m annslam_lib hub`` started as root for two
+"""The class hub for real: ``python -m annslam_lib hub`` started as root for two
 students, each server run by JupyterHub's LocalProcessSpawner as the student's own Unix
 account, driven over the REST API. What one student's kernel can reach of another's files is
 tried from inside the kernel, not only through the file API."""

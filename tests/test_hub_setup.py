@@ -1,4 +1,4 @@
-"""The class hub's parts that need no running hub (issue 20): the class file, the students'
+"""The class hub's parts that need no running hub: the class file, the students'
 Unix accounts, each role's Jupyter configuration, JupyterHub's settings, the passwords, the
 student environment's pins, and a student's folder filled from the release as that student.
 The hub itself, started for real, is tested in tests/test_hub.py."""

@@ -239,7 +239,8 @@ def test_a_failed_install_is_retried(tmp_path):
 
 @pytest.mark.parametrize("minor", [12, 13])
 def test_every_other_pin_has_wheels_for_the_newer_pythons(minor, tmp_path):
-    """README: on 3.12 and 3.13 everything but torch resolves from PyPI as binary wheels."""
+    """INSTRUCTOR.md, Python versions: on 3.12 and 3.13 everything but torch resolves from PyPI
+    as binary wheels."""
     reqs = [line.split("#")[0].strip() for line in (ROOT / "environment.txt").read_text().splitlines()]
     reqs = [r for r in reqs if r and not r.startswith(("torch", "-e"))]
     report = tmp_path / "report.json"

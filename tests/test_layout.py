@@ -1,4 +1,4 @@
-"""The library's shape (issue 12): folders are layers, no import cycles, no module over
+"""The library's shape: folders are layers, no import cycles, no module over
 800 lines, every subpackage names what it holds, and the light import paths stay light.
 The cycle check reads the import statements (ast), not a list kept by hand."""
 import ast

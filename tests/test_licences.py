@@ -1,4 +1,4 @@
-"""Ready to adopt (issue 24): the licences and the citation exist, agree with the package
+"""Ready to adopt: the licences and the citation exist, agree with the package
 metadata, and are linked where an instructor looks first."""
 import json
 import tomllib

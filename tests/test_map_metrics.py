@@ -94,7 +94,7 @@ def _by_hand(mapped, true):
 @pytest.mark.parametrize("angle_deg, shift", [(15.0, (0.0, 0.0)), (15.0, (6.0, -3.0)),
                                               (-40.0, (25.0, 10.0)), (127.0, (-20.0, 5.0))])
 def test_map_errors_align_first_does_not_depend_on_the_frame(beacons, angle_deg, shift):
-    """Issue 13 finding 6: a map whose frame is rotated (15 deg is 5 m at 20 m) gives the
+    """A map whose frame is rotated (15 deg is 5 m at 20 m) gives the
     same matches and the same aligned RMSE as the same map in the right frame, plus a
     spurious landmark and a missed beacon; the absolute error shows the frame."""
     rng = np.random.default_rng(5)

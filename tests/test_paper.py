@@ -135,7 +135,7 @@ def test_errata_markdown_below_layout_by_key():
     for e, line in zip(paper.ERRATA[:2], items):
         assert f"printed ${e.printed}$" in line and f"correct ${e.correct}$" in line
     assert md == paper.errata_markdown(list(paper.ERRATA[:2]), formulas="below")  # records work too
-    # the default: every erratum, one table with the formulas inline (the README's)
+    # the default: every erratum, one table with the formulas inline (docs/errata.md's)
     assert paper.errata_markdown().count("\n") == len(paper.ERRATA) + 1
     with pytest.raises(ValueError, match="formulas"):
         paper.errata_markdown(keys, formulas="beside")

@@ -1,4 +1,4 @@
-"""The map against the survey, and the split of the innovation covariance (issue 21):
+"""The map against the survey, and the split of the innovation covariance:
 checked against a direct computation, against the chi-square distribution, and on the
 simulator, where a consistent filter's innovations must have the variance it predicts."""
 import types

@@ -22,7 +22,7 @@ def test_residual_reads_as_its_bound_or_shows_the_value(x, bound, unit, text):
 
 
 def test_the_phrase_does_not_depend_on_the_last_digits():
-    # what two CPUs printed for the same quantity (issue 19): the same words
+    # what two CPUs printed for the same quantity: the same words
     assert residual(3.3e-16) == residual(2.2e-16) == residual(0.0)
     assert residual(6.8e-15) == residual(9.3e-15)
 

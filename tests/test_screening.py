@@ -1,4 +1,4 @@
-"""Damaged sensor streams (issue 13 finding 5) on the Car Park run: each fault injected, the
+"""Damaged sensor streams on the Car Park run: each fault injected, the
 stated rule of annslam_lib.data.screening applied, counted in the result, and the run the
 same as on the data repaired by hand (or, for a clock jump, kept and visible)."""
 import dataclasses

@@ -1,4 +1,4 @@
-"""Copied-code detection (issue 24, annslam_lib.course.similarity): a renamed or reformatted
+"""Copied-code detection (annslam_lib.course.similarity): a renamed or reformatted
 copy of the library's function, and two students sharing code, are flagged; honest
 solutions of the same exercise are not."""
 import inspect

@@ -1,4 +1,4 @@
-"""Systematic errors modelled instead of absorbed (issue 21, notebook 05): a laser
+"""Systematic errors modelled instead of absorbed (notebook 05): a laser
 calibration read off a survey and applied to every detection, and a steering noise that
 grows in turns. Checked on the simulator, where the injected errors are known, and
 against a hand-made equivalent."""

@@ -1,4 +1,4 @@
-"""A big class on Zero to JupyterHub (issue 20): what can be checked without a cluster.
+"""A big class on Zero to JupyterHub: what can be checked without a cluster.
 
 hub/z2jh/config.yaml against the chart keys it uses (a schema written from the chart's
 reference, which must refuse a misspelt key), its Python snippets run against stand-ins of

@@ -23,6 +23,7 @@ from matplotlib.figure import Figure
 
 from .. import _checks
 from ..data.records import Dataset, truncate
+from ..evaluation import consistency
 from ..evaluation.summary import pose_trace, run_metrics
 from ..evaluation.trajectory import trajectory_errors
 from ..plots.slam import (CAR_PARK_LIMITS, plot_consistency, plot_correlation,
@@ -36,13 +37,55 @@ from ..slam.runner import run
 
 __all__ = ["setup", "fixed_initial_pose", "slam_summary", "slam_explorer", "GATE_OPTIONS",
            "consistency_figure", "nees_comparison_figure", "figure5", "landmark_zooms_figure",
-           "correlation_figure"]
+           "correlation_figure", "CONSISTENCY_SEEDS", "WIDE_GATE", "consistency_study", "judge_study"]
 
 #: Size of the explorer's image (inches at plots.style.DPI): shown at its own pixel size.
 EXPLORER_FIGSIZE = (FIG_WIDTH, 5.6)
 
 #: Gate probabilities offered by the explorer's gate slider.
 GATE_OPTIONS = (0.5, 0.9, 0.95, 0.99, 0.999)
+
+#: The consistency study's runs (section 4): 300 seeded scenes fixed before looking, not
+#: used to choose any setting (chapter 04a's study uses the same scenes for localisation).
+CONSISTENCY_SEEDS = tuple(range(20000, 20300))
+#: The study's second filter: a 99.99 % gate (and a new-landmark threshold above it).
+WIDE_GATE = {"gate_prob": 0.9999, "new_landmark_prob": 0.99999}
+
+
+def consistency_study(seeds=CONSISTENCY_SEEDS) -> dict:
+    """Chapter 05, section 4: the midpoint SLAM filter on ``seeds`` (the simulator's loop,
+    two laps), with the course's 99 % gate and with :data:`WIDE_GATE` on the same runs,
+    judged by :func:`judge_study`. Computed once per machine, then read back (the notebook
+    computes the two Monte Carlos in separate cells)."""
+    seeds = tuple(int(s) for s in seeds)
+    return judge_study(consistency.monte_carlo(seeds, "midpoint"),
+                       consistency.monte_carlo(seeds, "midpoint", **WIDE_GATE))
+
+
+def judge_study(gate_99: consistency.MonteCarlo, gate_9999: consistency.MonteCarlo) -> dict:
+    """The two gates' SLAM Monte Carlos on the same runs judged (chapter 05, section 4).
+
+    Returns {'gate_99', 'gate_9999': the Monte Carlos; for each gate g, 'pose_g' and
+    'map_g': consistency.Effect of each run's ANEES per dof and map NEES per dof
+    (:data:`consistency.EFFECT_RULE`); 'pose_difference', 'map_difference': the paired
+    Effect of 99 % minus 99.99 %}."""
+    out = {"gate_99": gate_99, "gate_9999": gate_9999}
+    for k in ("gate_99", "gate_9999"):
+        if not isinstance(out[k], consistency.MonteCarlo) or out[k].map is None:
+            raise TypeError(f"{k} must be a SLAM consistency.monte_carlo result (with a map)")
+    if gate_99.nees_runs.shape != gate_9999.nees_runs.shape:
+        raise ValueError("the two gates must be run on the same runs")
+    vals = {}
+    for g, label in (("99", "99 %"), ("9999", "99.99 %")):
+        mc = out["gate_" + g]
+        vals["pose_" + g] = consistency.run_ratios(mc.nees_runs)
+        vals["map_" + g] = mc.map.runs
+        out["pose_" + g] = consistency.ratio_effect(vals["pose_" + g], f"{label} gate, pose ANEES / dof")
+        out["map_" + g] = consistency.ratio_effect(vals["map_" + g], f"{label} gate, map NEES / dof")
+    for q in ("pose", "map"):
+        out[q + "_difference"] = consistency.paired_effect(
+            vals[q + "_99"], vals[q + "_9999"], f"99 % minus 99.99 %, {q} NEES / dof")
+    return out
 
 
 def fixed_initial_pose(dataset: Dataset, config: SlamConfig) -> SlamConfig:

@@ -31,7 +31,13 @@ from ..plots.style import notebook_setup as setup
 from ..slam.config import SlamConfig
 
 __all__ = ["setup", "pose_trace_figure", "r_scale_figure", "transfer_figure", "figure5_figure",
-           "training_curves_figure", "r_scale_explorer"]
+           "training_curves_figure", "r_scale_explorer", "VERDICT_WORDS", "verdict_word",
+           "verdict_table"]
+
+#: The verdict column's words (section 7), bold where a rule decided.
+VERDICT_WORDS = {"holds": "**holds**", "does not hold": "**does not hold**",
+                 "not demonstrated": "**not demonstrated**",
+                 "not testable this way": "not testable this way"}
 
 #: Size of the explorer's image (inches at plots.style.DPI): the text column's width.
 EXPLORER_FIGSIZE = (FIG_WIDTH, 4.2)
@@ -88,6 +94,28 @@ def figure5_figure(st: Study, dataset: Dataset, seed_index: int = 0,
                         show_truth=False)
     axes[1].set(xlim=zoom[0], ylim=zoom[1])
     return fig
+
+
+def verdict_word(row: dict) -> str:
+    """The verdict of one ``paper.study.verdict`` row: its 'verdict' word where a rule
+    worded it (:func:`paper.study.fold_claim`: 'holds', 'does not hold', 'not
+    demonstrated'), else from 'holds': True 'holds', False 'does not hold', None 'not
+    testable this way'."""
+    word = row.get("verdict")
+    if word is None:
+        word = {True: "holds", False: "does not hold", None: "not testable this way"}[row["holds"]]
+    if word not in VERDICT_WORDS:
+        raise ValueError(f"unknown verdict {word!r} in the row {row.get('claim')!r}")
+    return word
+
+
+def verdict_table(rows: list[dict]) -> str:
+    """``paper.study.verdict``'s rows as a Markdown table (section 7): claim | what we
+    measured | verdict (:func:`verdict_word`) | why."""
+    lines = ["| the paper's claim | what we measured | verdict | why |", "|---|---|---|---|"]
+    lines += [f"| {r['claim']} | {r['measured']} | {VERDICT_WORDS[verdict_word(r)]} | {r['why']} |"
+              for r in rows]
+    return "\n".join(lines)
 
 
 def _line(s: dict, reference: dict | None) -> str:

@@ -33,7 +33,7 @@ yourself"), found both in its source (and in the helpers it uses from the studen
 cells) and by a call monitor in the kernel (every thread); a solution that could hide what
 it calls from both (dynamic imports, computed attribute names, function internals) scores 0
 with the constructs named (:func:`~annslam_lib.course.plan.static_evasions`). What no
-check stops: a student who copies the library's code into the answer; the README says so.
+check stops: a student who copies the library's code into the answer; INSTRUCTOR.md says so.
 
 Nothing the grader's own process loads can come from a submission: its bytecode lives in
 a private folder (:func:`prepare_grader`), and every file of the course's folders,

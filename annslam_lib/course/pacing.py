@@ -6,7 +6,7 @@ chapter's text cells at :data:`WORDS_PER_MINUTE` (derivations read with their co
 output, slower than prose). Exercises: :data:`MINUTES_PER_POINT` per autograded point
 (:data:`MINUTES_PER_POINT_OF` for the capstone, whose points grade a whole filter) and
 :data:`MINUTES_PER_UNGRADED` per ungraded exercise (a solution cell without a test cell).
-The machine's own time (Run All) is in the README's waiting-times table and adds under a
+The machine's own time (Run All) is in INSTRUCTOR.md's table 'What the machine takes' and adds under a
 minute per chapter.
 """
 from __future__ import annotations

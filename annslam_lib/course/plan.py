@@ -13,9 +13,15 @@ from pathlib import Path
 import nbformat
 
 __all__ = ["PlannedCell", "GradePlan", "plan", "free_names", "static_forbidden",
-           "static_evasions", "CODE_STUB"]
+           "static_evasions", "CODE_STUB", "SKIP_TAG"]
 
 CODE_STUB = "# YOUR CODE HERE\nraise NotImplementedError()"
+#: A course cell of the INSTRUCTOR's notebook with this tag is not run when grading: a study
+#: of hundreds of simulated runs that no graded cell reads would cost every submission minutes
+#: (the sandbox reads no study cache). Only the instructor's tags count; a submission's are
+#: never read. That the honest solutions still earn full marks is what shows no graded cell
+#: needs a skipped one (the grading tests of each chapter).
+SKIP_TAG = "grading-skip"
 _BUILTINS = set(dir(builtins))
 
 
@@ -358,6 +364,8 @@ def plan(instructor, submission) -> GradePlan:
             cells.append(PlannedCell(i, "solution", src, gid))
         elif m.get("grade"):
             cells.append(PlannedCell(i, "test", c.source, gid, float(m.get("points", 0))))
+        elif SKIP_TAG in (c.get("metadata", {}).get("tags") or []):
+            continue                      # a study no graded cell reads (SKIP_TAG)
         else:
             cells.append(PlannedCell(i, "course", c.source))
     course = [c.source for c in cells if c.role == "course"]

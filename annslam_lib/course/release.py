@@ -151,7 +151,7 @@ def exercises(path, *, instructor: bool = True) -> list[Exercise]:
 
 
 def exercise_table(paths) -> str:
-    """Markdown table of the autograded exercises per notebook (README; ``python -m
+    """Markdown table of the autograded exercises per notebook (INSTRUCTOR.md; ``python -m
     annslam_lib exercises``): notebook, number of exercises, their grade ids, points."""
     rows = ["| notebook | exercises | grade ids | points |", "|---|---|---|---|"]
     for path in sorted(Path(p) for p in paths):

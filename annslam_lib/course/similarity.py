@@ -1,4 +1,4 @@
-"""Copied-code detection for the grader (issue 24): how alike two solutions are once the
+"""Copied-code detection for the grader: how alike two solutions are once the
 names a student chooses, the constants and the formatting are taken away.
 
 A solution is reduced to its syntax tree (:func:`normalised`): the sequence of node types

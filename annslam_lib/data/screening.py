@@ -1,4 +1,4 @@
-"""Sensor streams checked on entry to a filter run (issue 13; ``slam.runner.run`` calls
+"""Sensor streams checked on entry to a filter run (``slam.runner.run`` calls
 :func:`screen` first, and counts what it did in ``SlamResult.counts``).
 
 A damaged stream must not diverge silently. The records already refuse what cannot be a

@@ -1,4 +1,4 @@
-"""Noise values from the data (issue 13; notebook 06 "the GPS", chapter 05).
+"""Noise values from the data (notebook 06 "the GPS", chapter 05).
 
 A filter's GPS noise is a claim about the receiver. :func:`gps_sigma_from_scatter` reads it
 off the receiver's own fixes: for fixes at a steady rate dt, the second difference

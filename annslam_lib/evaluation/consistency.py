@@ -22,7 +22,8 @@ from ..models.uncertainty import chi2_quantile, mahalanobis2
 
 __all__ = ["chi2_quantile", "chi2_band", "Consistency", "nees_consistency", "scan_nis",
            "nis_consistency", "pose_nees", "map_nees", "MapConsistency", "map_consistency",
-           "correlation_matrix", "MonteCarlo", "monte_carlo"]
+           "correlation_matrix", "MonteCarlo", "monte_carlo", "MARGIN", "EFFECT_RULE",
+           "Effect", "ratio_effect", "paired_effect", "run_ratios"]
 
 
 def chi2_band(dof, n=1, prob: float = 0.95) -> tuple[np.ndarray | float, np.ndarray | float]:
@@ -208,6 +209,142 @@ def map_nees(result, dataset: Dataset) -> tuple[float, int]:
     return float(mahalanobis2(est[None], truth, P)[0]), int(est.size)
 
 
+#: The practical margin of the consistency verdicts, chosen before any result: a NEES ratio
+#: within 1 +- MARGIN means standard deviations off by about 2.5 % or less (were S off by the
+#: same ratio, a 99 % gate would pass 98.75 to 99.2 % of correct sightings).
+MARGIN = 0.05
+
+#: The decision rule of :func:`ratio_effect` and :func:`paired_effect`, fixed before any result.
+EFFECT_RULE = (
+    "One value per run (each run a new scene: its own beacon layout and noise), e.g. the "
+    "run's time-averaged pose NEES divided by its 3 dof, or its map NEES per dof; the "
+    "effect is the mean over the runs with its 95 % t-interval (the runs' own spread, so "
+    "scene-to-scene variation is inside the interval). Words: 'over-confident' if the whole "
+    "interval is above 1, 'under-confident' if below, otherwise 'no detectable difference'; "
+    "and 'within the 5 % margin' if the interval lies inside [0.95, 1.05]. Two filters on "
+    "the same runs: the mean of their per-run difference with its t-interval, 'higher' or "
+    "'lower' if the interval excludes 0, otherwise 'no detectable difference'. The power "
+    "is the chance that the rule calls a filter with ratio 1.05 (P / 1.05) over-confident, "
+    "from the runs' own spread.")
+
+
+def run_ratios(nees_runs, dof: int = 3) -> np.ndarray:
+    """Each run's time-averaged NEES per degree of freedom (N,), from the pose NEES of N
+    runs scan by scan (N, K) (``MonteCarlo.nees_runs``): 1 for a consistent filter.
+    Chapters 04a and 05."""
+    a = _stack("nees", nees_runs)
+    _checks.integer("dof", dof, lo=1)
+    return a.mean(axis=1) / dof
+
+
+def _t_crit(n: int, prob: float) -> float:
+    from scipy.stats import t as student_t
+    return float(student_t.ppf(0.5 * (1 + prob), n - 1))
+
+
+def _values(name: str, values) -> np.ndarray:
+    v = np.asarray(values, dtype=float)
+    if v.ndim != 1 or v.size < 3:
+        raise ValueError(f"{name} must be one value per run, at least 3 runs, got shape {v.shape}")
+    if not np.all(np.isfinite(v)):
+        raise ValueError(f"{name} holds {int(np.sum(~np.isfinite(v)))} non-finite value(s)")
+    return v
+
+
+@dataclass(frozen=True)
+class Effect:
+    """A consistency effect over independent runs (:data:`EFFECT_RULE`, chapters 04a, 05).
+
+    name; n: runs; mean, lo, hi: the mean over the runs and its ``prob`` t-interval; sd: the
+    runs' standard deviation; null: 1 for a ratio, 0 for a paired difference; word: the
+    verdict (:data:`EFFECT_RULE`); within_margin: the interval inside null +- ``margin``
+    (ratios only; None for a difference); power: the chance that the rule resolves an effect
+    of ``margin`` (a ratio of 1 + margin, or a difference of +- margin) at this n and sd."""
+
+    name: str
+    n: int
+    mean: float
+    lo: float
+    hi: float
+    sd: float
+    null: float
+    word: str
+    within_margin: bool | None
+    power: float
+    margin: float
+    prob: float
+
+    @property
+    def half_width(self) -> float:
+        """Half the interval's width: the smallest effect this study resolves."""
+        return 0.5 * (self.hi - self.lo)
+
+    def summary(self) -> str:
+        pct = 100 * (self.mean - self.null)
+        if self.null == 1.0:
+            head = (f"{self.name}: {self.mean:.3f} [{self.lo:.3f}, {self.hi:.3f}] over {self.n} runs "
+                    f"({pct:+.1f} %): {self.word}, "
+                    f"{'within' if self.within_margin else 'not within'} the {100 * self.margin:.0f} % margin")
+        else:
+            head = (f"{self.name}: {self.mean:+.4f} [{self.lo:+.4f}, {self.hi:+.4f}] over {self.n} "
+                    f"paired runs: {self.word}")
+        return f"{head} (power against {100 * self.margin:.0f} %: {100 * self.power:.0f} %)"
+
+
+def _effect(name: str, v: np.ndarray, null: float, words: tuple[str, str], margin: float,
+            prob: float) -> Effect:
+    from scipy.stats import t as student_t
+    p = _checks.probability("prob", prob)
+    m = _checks.real("margin", margin, lo=0.0, strict=True)
+    n, mean, sd = v.size, float(v.mean()), float(v.std(ddof=1))
+    tc = _t_crit(n, p)
+    half = tc * sd / np.sqrt(n)
+    lo, hi = mean - half, mean + half
+    word = words[0] if lo > null else words[1] if hi < null else "no detectable difference"
+    within = bool(null - m <= lo and hi <= null + m) if null == 1.0 else None
+    se = sd / np.sqrt(n)
+    power = 1.0 if se == 0 else float(1 - student_t.cdf(tc - m / se, n - 1))
+    return Effect(name=name, n=n, mean=mean, lo=float(lo), hi=float(hi), sd=sd, null=null,
+                  word=word, within_margin=within, power=power, margin=m, prob=p)
+
+
+def ratio_effect(values, name: str = "NEES / dof", *, margin: float = MARGIN,
+                 prob: float = 0.95) -> Effect:
+    """The consistency ratio of independent runs, one value per run (a run's ANEES per dof,
+    :func:`run_ratios`, or its map NEES per dof), as an :class:`Effect` around 1 with its
+    t-interval, its word ('over-confident', 'under-confident' or 'no detectable
+    difference'), whether it is within 1 +- ``margin``, and the power of the rule against a
+    ratio of 1 + ``margin`` (:data:`EFFECT_RULE`; chapters 04a and 05).
+
+    Parameters
+    ----------
+    values : (N,) array_like, N >= 3, finite
+    name : str, the label of the summary line
+    margin : float > 0, the practical margin (default :data:`MARGIN`)
+    prob : float in (0, 1), the interval's probability
+
+    Returns
+    -------
+    Effect
+    """
+    v = _values("values", values)
+    if np.any(v < 0):
+        raise ValueError("a NEES ratio cannot be negative")
+    return _effect(name, v, 1.0, ("over-confident", "under-confident"), margin, prob)
+
+
+def paired_effect(a, b, name: str = "difference", *, margin: float = MARGIN,
+                  prob: float = 0.95) -> Effect:
+    """Two filters on the same runs: the per-run difference ``a - b`` as an :class:`Effect`
+    around 0 ('higher', 'lower' or 'no detectable difference'; the power is against a
+    difference of ``margin``). Pairing removes the scene-to-scene variation both share, so
+    it resolves far smaller differences than two separate intervals (chapter 04a)."""
+    va, vb = _values("a", a), _values("b", b)
+    if va.shape != vb.shape:
+        raise ValueError(f"a and b must hold the same runs, got {va.size} and {vb.size} values")
+    return _effect(name, va - vb, 0.0, ("higher", "lower"), margin, prob)
+
+
 @dataclass(frozen=True)
 class MapConsistency:
     """Map NEES of N runs (notebook 05): per_dof = total NEES / total dof, its ``prob``
@@ -247,14 +384,17 @@ def map_consistency(values, dofs, *, prob: float = 0.95) -> MapConsistency:
 @dataclass(frozen=True)
 class MonteCarlo:
     """The simulated filter on N runs (:func:`monte_carlo`): per-scan pose NEES and NIS
-    judged scan by scan, the landmarks each run mapped, the final map's NEES, and every
-    run's pose NEES (N, K) (for ``scan_null.null_test`` and for rescaled filters)."""
+    judged scan by scan, the landmarks each run mapped, the final map's NEES, every
+    run's pose NEES (N, K) (for ``scan_null.null_test`` and for rescaled filters), and the
+    number of detections each scan of each run rejected (N, K) (neither associated nor
+    new: on the simulator without clutter, correct sightings the gate refused)."""
 
     nees: Consistency
     nis: Consistency
     mapped: tuple
     map: MapConsistency | None          # None for a known map (EKF localisation)
     nees_runs: np.ndarray
+    rejected_runs: np.ndarray | None = None
 
 
 @_memoize
@@ -280,16 +420,19 @@ def monte_carlo(seeds, motion_model: str = "euler", route: str = "loop", laps: i
     Computed once per machine (``annslam_lib._cache``)."""
     from ..data import simulate
     from ..slam.config import SlamConfig
+    from ..slam.results import STATUS
     from ..slam.runner import run
 
-    sims = [simulate.simulate(seed=int(s), route=route, laps=laps, raw_laser=False) for s in seeds]
-    if not sims:
+    seeds = [int(s) for s in seeds]
+    if not seeds:
         raise ValueError("monte_carlo needs at least one seed")
-    t_scan = sims[0].detections.t
     cfg = SlamConfig.for_dataset("simulated", motion_model=motion_model, **config)
-    nees, nis, dof, mapped, maps = [], [], [], [], []
+    nees, nis, dof, mapped, maps, rejected = [], [], [], [], [], []
     _checks.flag("draw_initial", draw_initial)
-    for seed, ds in zip(seeds, sims):
+    t_scan = None
+    for seed in seeds:                     # one run in memory at a time (studies of hundreds)
+        ds = simulate.simulate(seed=seed, route=route, laps=laps, raw_laser=False)
+        t_scan = ds.detections.t if t_scan is None else t_scan
         run_cfg = cfg
         if draw_initial:
             sd = np.array([cfg.initial_sigma_xy, cfg.initial_sigma_xy, cfg.initial_sigma_phi])
@@ -303,8 +446,10 @@ def monte_carlo(seeds, motion_model: str = "euler", route: str = "loop", laps: i
         nis.append(s)
         dof.append(d)
         mapped.append(int(r.counts["landmarks"]))
+        refused = r.observations.status == STATUS["rejected"]
+        rejected.append(np.bincount(r.observations.scan[refused], minlength=len(ds.detections)))
         if cfg.map_mode == "slam":             # a known map is the truth: nothing to judge
             maps.append(map_nees(r, ds))
     return MonteCarlo(nees=nees_consistency(nees, t_scan), nis=nis_consistency(nis, dof, t_scan),
                       mapped=tuple(mapped), map=map_consistency(*zip(*maps)) if maps else None,
-                      nees_runs=_stack("nees", nees))
+                      nees_runs=_stack("nees", nees), rejected_runs=np.array(rejected))

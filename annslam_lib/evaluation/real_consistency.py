@@ -1,5 +1,5 @@
 """Consistency on a real run, where there is no truth: the map against the survey, and
-where the innovation covariance comes from (notebook 05 "the Car Park run", issue 21).
+where the innovation covariance comes from (notebook 05 "the Car Park run").
 
 - :func:`survey_nees`: the map as a whole against the surveyed beacons. The errors of a
   SLAM map share its frame (one common shift and rotation), so counting beacons inside

@@ -1,4 +1,4 @@
-"""A consistent filter's Monte-Carlo statistics when scans are correlated (notebook 05, issue 21).
+"""A consistent filter's Monte-Carlo statistics when scans are correlated (notebook 05).
 
 The per-scan band of the average NEES of N runs (``consistency.chi2_band(3, N)``) holds at
 each scan with probability ``prob``. Two statistics summarise a run of K scans: the share of

@@ -29,7 +29,7 @@ import numpy as np
 __all__ = ["GradingError", "Mistake", "Passed", "passed", "call", "check_function", "check_jacobian", "check_raises",
            "describe", "fail", "fmt", "NOT_WRITTEN", "forbids", "forbidden", "watch_calls",
            "function_path", "prefetch", "labelled", "passing_prefetch",
-           "allowing_library_calls", "full_feedback",
+           "allowing_library_calls", "full_feedback", "is_full_feedback",
            "graded_student", "grading_student"]
 
 NOT_WRITTEN = "is not written yet"
@@ -231,6 +231,12 @@ _FULL_FEEDBACK: contextvars.ContextVar[bool] = contextvars.ContextVar(
 
 _STUDENT: contextvars.ContextVar[str | None] = contextvars.ContextVar("annslam_student",
                                                                    default=None)
+
+
+def is_full_feedback() -> bool:
+    """True inside :func:`full_feedback` (or with ``ANNSLAM_FEEDBACK=full``): messages may
+    carry their answer."""
+    return _FULL_FEEDBACK.get()
 
 
 def graded_student() -> str | None:

@@ -94,5 +94,5 @@ def check_filter(my_diagnosis, letter: str, quiet: bool = False):
 
 
 def _full() -> bool:
-    from .core import _FULL_FEEDBACK
-    return _FULL_FEEDBACK.get()
+    from .core import is_full_feedback
+    return is_full_feedback()

@@ -699,7 +699,7 @@ def _cell(text: str) -> str:
 
 
 def errata_markdown(entries=None, *, formulas: str = "inline", collapsed: bool = False) -> str:
-    """The errata as a Markdown table (the README's table is this output, tested):
+    """The errata as a Markdown table (docs/errata.md's table is this output, tested):
     section, quantity, printed form, correct form, kind, and the measured
     discrepancy of the printed and the corrected form (see :class:`Erratum`); one below
     the checks' resolution (1e-7, central differences) is written "below 1e-7", since its

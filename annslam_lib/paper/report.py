@@ -48,8 +48,12 @@ def table_markdown(st: Study, metrics=None) -> str:
 def verdict_markdown(rows: list[dict]) -> str:
     """:func:`verdict`'s rows as a Markdown table: claim | what we measured | verdict | why."""
     word = {True: "**holds**", False: "**does not hold**", None: "not testable this way"}
+
+    def said(r):            # a row tested but undecided carries its own word (not demonstrated)
+        return f"**{r['verdict']}**" if r.get("verdict") else word[r["holds"]]
+
     lines = ["| the paper's claim | what we measured | verdict | why |", "|---|---|---|---|"]
-    lines += [f"| {r['claim']} | {r['measured']} | {word[r['holds']]} | {r['why']} |" for r in rows]
+    lines += [f"| {r['claim']} | {r['measured']} | {said(r)} | {r['why']} |" for r in rows]
     return "\n".join(lines)
 
 

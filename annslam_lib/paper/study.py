@@ -31,7 +31,10 @@ Those per-seed differences measure training randomness on ONE window and one gro
 beacons per seed (the plain filter is deterministic), so the verdict's held-out accuracy
 rows come from :func:`fold_study` instead: blocked cross-validation over five time folds
 (trajectory) and five beacon folds (map), three seeds per fold, paired differences over
-the folds (:data:`FOLD_RULE`).
+the folds (:data:`FOLD_RULE`): the corrected resampled t-interval of Nadeau and Bengio
+(2003, the folds' networks share most of their training data) and two one-sided tests of
+equivalence within a margin (:func:`fold_comparison`), worded 'better', 'worse',
+'equivalent within the margin' or 'not demonstrated'.
 
 Pose uncertainty is the trace of the POSITION block of the laser pose covariance,
 P_xx + P_yy (m^2), after each scan's update (a trace over x, y and phi would add m^2 to
@@ -67,10 +70,14 @@ from ..perception.beacons import point_features
 from ..perception.sources import with_detections
 from ..slam.config import SlamConfig
 from ..slam.runner import run
+from .fold_stats import (FOLD_MARGIN, FOLD_METRICS, FOLD_RULE, FOLD_WORDS, FoldComparison,
+                         corrected_interval, corrected_se, fold_comparison, sign_flip_p, tost_p)
 
 __all__ = ["CONFIGURATIONS", "natural_config", "Study", "study", "fast_dataset", "Transfer",
            "transfer", "verdict", "DECISION_RULE", "Paired", "paired", "paired_values",
-           "FOLD_RULE", "FOLD_METRICS", "FoldStudy", "fold_study", "fold_values", "sign_flip_p",
+           "FOLD_RULE", "FOLD_MARGIN", "FOLD_WORDS", "FOLD_METRICS", "FoldStudy", "fold_study",
+           "fold_values", "sign_flip_p", "corrected_se", "corrected_interval", "tost_p",
+           "FoldComparison", "fold_comparison",
            "SCALES", "r_scale_summary", "r_scale_sweep",
            "equivalent_scale", "reference_from_study"]
 
@@ -347,7 +354,9 @@ DECISION_RULE = (
     "mean difference over the seeds. 'better' if the whole interval is below 0, 'worse' if it "
     "is above 0, otherwise 'no detectable difference'. A claim of accuracy 'thanks to the ANN' "
     "holds only if the ANN is better than both the beacons-only filter and the control with "
-    "its R'. In-sample numbers (whole run, whole map: the network was trained on them) are "
+    "its R'. A claim tested this way (the simulator's transfers) holds if 'better', does not "
+    "hold if 'worse', and is 'not demonstrated' otherwise: without a margin, no detectable "
+    "difference is not shown to be none. In-sample numbers (whole run, whole map: the network was trained on them) are "
     "shown but not counted.")
 
 
@@ -410,21 +419,44 @@ def paired_values(values_a, values_b, *, a: str = "a", b: str = "b", metric: str
     return Paired(a=a, b=b, metric=metric, values=d, mean=mean, lo=lo, hi=hi, prob=p)
 
 
-def _accuracy_why(d_b: Paired, d_c: Paired, holds: bool) -> str:
-    if holds:
+#: A claim's word -> verdict rows' ``holds`` (None: not established either way).
+_HOLDS = {"holds": True, "does not hold": False, "not demonstrated": None}
+
+
+def fold_claim(against_plain: FoldComparison, against_control: FoldComparison) -> str:
+    """The word of :data:`FOLD_RULE` for "accuracy thanks to the ANN" (notebook 08 section
+    7): 'holds' if the ANN is 'better' than both the plain filter and the control, 'does
+    not hold' if it is 'equivalent within the margin' or 'worse' against either, otherwise
+    'not demonstrated'."""
+    words = (against_plain.decision, against_control.decision)
+    if words == ("better", "better"):
+        return "holds"
+    if any(w in ("worse", "equivalent within the margin") for w in words):
+        return "does not hold"
+    return "not demonstrated"
+
+
+def _fold_why(c_b: FoldComparison, c_c: FoldComparison, word: str) -> str:
+    if word == "holds":
         return "better than both the plain filter and the control"
-    if d_b.decision == "better":
-        return ("better than the plain filter, but not than the control without a network: "
-                "its R' does it")
-    return f"{d_b.decision} against the plain filter"
+    why = f"{c_b.decision} against the plain filter, {c_c.decision} against the control"
+    if c_b.decision == "better" and word == "does not hold":
+        return why + ": its R' does it"
+    if word == "not demonstrated":
+        why += (f": the corrected intervals hold both 0 and differences beyond the "
+                f"±{100 * FOLD_MARGIN:g} % margin, so neither a gain nor its absence is shown")
+    return why
 
 
 def verdict(st: Study, transfers: dict | None = None, folds: FoldStudy | None = None) -> list[dict]:
     """The paper's claims against the measurements of ``st`` (and of the simulator
     ``transfers``: {name: Transfer}), one dict per claim: claim, measured (text with the
-    numbers), holds (True / False / None = not measurable) and why. The criteria are
-    stated in each row. The held-out accuracy rows follow :data:`FOLD_RULE` over the folds
-    of ``folds`` (:func:`fold_study`); without it they show the differences over the
+    numbers), holds (True / False / None = not established: not measurable, or tested
+    without a decision) and why. The rows that were tested and worded by a rule also carry
+    verdict: 'holds', 'does not hold' or 'not demonstrated' (:func:`fold_claim`; a row
+    without it reads 'not testable this way' when holds is None). The criteria are stated
+    in each row. The held-out accuracy rows follow :data:`FOLD_RULE` over the folds of
+    ``folds`` (:func:`fold_study`); without it they show the differences over the
     training seeds (:data:`DECISION_RULE`) and are not counted: with one held-out window
     and a deterministic plain filter, such an interval measures training randomness."""
     m, sd = st.mean, st.sd
@@ -456,17 +488,17 @@ def verdict(st: Study, transfers: dict | None = None, folds: FoldStudy | None = 
         for mt, what in (("traj_rmse", "trajectory vs GPS, held-out time folds"),
                          ("map_rmse", "map vs surveyed beacons, held-out beacon folds"),
                          ("map_rmse_aligned", "map shape (aligned), held-out beacon folds")):
-            d_b, d_c = folds.paired("ann", "beacons", mt), folds.paired("ann", "control", mt)
-            p_b, p_c = folds.p_value("ann", "beacons", mt), folds.p_value("ann", "control", mt)
-            holds = d_b.decision == "better" and d_c.decision == "better"
+            c_b, c_c = folds.compare("ann", "beacons", mt), folds.compare("ann", "control", mt)
+            word = fold_claim(c_b, c_c)
             rows.append(dict(
                 claim=f"high-accuracy navigation and mapping thanks to the ANN (5): {what}",
-                measured=(f"mean over {d_b.values.size} folds: ANN {fm('ann', mt).mean():.3f} m, "
+                measured=(f"mean over {c_b.values.size} folds: ANN {fm('ann', mt).mean():.3f} m, "
                           f"beacons-only {fm('beacons', mt).mean():.3f} m, control "
-                          f"{fm('control', mt).mean():.3f} m; ANN - beacons-only {d_b.text()} "
-                          f"(sign-flip p {p_b:.2f}); ANN - control {d_c.text()} (p {p_c:.2f})"),
-                holds=bool(holds),
-                why=_accuracy_why(d_b, d_c, holds)))
+                          f"{fm('control', mt).mean():.3f} m; ANN - beacons-only {c_b.text()} "
+                          f"(sign-flip p {c_b.p_sign_flip:.2f}); ANN - control {c_c.text()} "
+                          f"(p {c_c.p_sign_flip:.2f})"),
+                holds=_HOLDS[word], verdict=word,
+                why=_fold_why(c_b, c_c, word)))
     seed_rows = () if folds is not None else (
         ("traj_rmse_heldout", "trajectory vs GPS, held-out time"),
         ("map_rmse_heldout", "map vs surveyed beacons, held-out beacons"),
@@ -521,52 +553,20 @@ def verdict(st: Study, transfers: dict | None = None, folds: FoldStudy | None = 
         why="the method as described needs the survey to train" if n_b else "no survey used"))
     for name, tr in (transfers or {}).items():
         d = tr.paired()
+        word = {"better": "holds", "worse": "does not hold"}.get(d.decision, "not demonstrated")
         rows.append(dict(
             claim=f"the network generalises to a new map (simulator: {name})",
             measured=(f"map RMSE {tr.plain.mean():.3f} -> {tr.ann.mean():.3f} m "
                       f"(better in {int(np.sum(tr.ann < tr.plain))} of {tr.ann.size} runs); "
                       f"ANN - plain {d.text()}"),
-            holds=d.decision == "better",
-            why=f"{d.decision} than the plain filter (paired over the test runs)"))
+            holds=_HOLDS[word], verdict=word,
+            why=f"{d.decision} against the plain filter (paired over the test runs)"))
     return rows
 
 
 
 # ------------------------------------------------- the verdict over folds of data
-
-#: The decision rule of :func:`fold_study`'s comparisons, fixed before any result.
-FOLD_RULE = (
-    "Five contiguous time folds (equal numbers of training samples): for each, networks "
-    "trained outside the window +- 2 s (early stopping on a seeded random 15 % of those), "
-    "seeds 0, 1, 2; the fold's value is the mean over the seeds of the trajectory RMSE "
-    "against GPS inside the window. Five leave-beacons-out folds, the same three seeds: the "
-    "map RMSE over the fold's held-out beacons (absolute, and with the whole map aligned). "
-    "For each fold the ANN filter's value minus the comparator's on the same window or "
-    "beacons; the 95 % t-interval of the mean difference over the five folds (4 dof). "
-    "'better' if the whole interval is below 0, 'worse' if above, otherwise 'no detectable "
-    "difference'; the exact sign-flip p-value is shown beside it (with five folds it cannot "
-    "fall below 2/32 = 0.0625, so it can support the interval, never decide). 'Thanks to "
-    "the ANN' needs 'better' against both the plain filter and the control with the "
-    "network's R'.")
-
-#: Metrics of :class:`FoldStudy`: name -> (fold kind, what it measures).
-FOLD_METRICS = {
-    "traj_rmse": ("time", "trajectory RMSE against GPS inside the fold's window, m"),
-    "map_rmse": ("beacons", "map RMSE over the fold's held-out beacons, m"),
-    "map_rmse_aligned": ("beacons", "the same with the whole map aligned onto the survey, m"),
-}
-
-
-def sign_flip_p(differences) -> float:
-    """Exact two-sided sign-flip (paired permutation) p-value of the mean of
-    ``differences``: the share of the 2^n sign patterns whose mean is at least as far from
-    0 as the observed one (n <= 20)."""
-    d = np.asarray(differences, dtype=float).ravel()
-    if d.size == 0 or d.size > 20 or not np.all(np.isfinite(d)):
-        raise ValueError(f"sign_flip_p needs 1 to 20 finite differences, got {d}")
-    signs = 1 - 2 * ((np.arange(2 ** d.size)[:, None] >> np.arange(d.size)) & 1)
-    means = np.abs(signs @ d) / d.size
-    return float(np.mean(means >= abs(d.mean()) * (1 - 1e-12)))
+# (its statistics and rule: paper.fold_stats)
 
 
 def _window_rmse(result, dataset: Dataset, lo: float, hi: float) -> float:
@@ -595,8 +595,10 @@ class FoldStudy:
     values: {configuration: {metric: (n_folds, n_seeds) array}} for 'ann', 'control' and
     'beacons' (the plain filter, the same in every seed column); edges: the time windows
     (n_folds + 1,), s; held_beacons: per beacon fold, the held-out beacon indices;
-    n_train: {'time' / 'beacons': (n_folds,) training samples}; n_train_if_beacons_held:
-    (n_folds,) what would be left if the window's beacons were held out too; histories:
+    n_train: {'time' / 'beacons': (n_folds,) training samples (trained on or used to stop)};
+    n_test: the same, (n_folds,) held-out samples (inside the window / of the held-out
+    beacons); n_train_if_beacons_held: (n_folds,) what would be left if the window's
+    beacons were held out too; histories:
     {'time' / 'beacons': [[history per seed] per fold]} (``TrainedModel.history`` with
     ``best_epoch``)."""
 
@@ -606,6 +608,7 @@ class FoldStudy:
     held_beacons: list
     values: dict
     n_train: dict
+    n_test: dict
     n_train_if_beacons_held: np.ndarray
     histories: dict
 
@@ -615,10 +618,34 @@ class FoldStudy:
             raise ValueError(f"unknown configuration {config!r} or metric {metric!r}")
         return self.values[config][metric].mean(axis=1)
 
-    def paired(self, a: str, b: str, metric: str, prob: float = 0.95) -> Paired:
-        """``a`` minus ``b`` fold by fold, with the t-interval over the folds."""
-        return paired_values(self.per_fold(a, metric), self.per_fold(b, metric), a=a, b=b,
-                             metric=metric, prob=prob)
+    def test_train_ratio(self, metric: str) -> float:
+        """n_test / n_train of the folds ``metric`` is measured on (:data:`FOLD_METRICS`):
+        mean held-out over mean training samples per fold, the Nadeau-Bengio correction's
+        ratio (:func:`corrected_se`)."""
+        if metric not in FOLD_METRICS:
+            raise ValueError(f"unknown metric {metric!r}")
+        kind = FOLD_METRICS[metric][0]
+        return float(np.mean(self.n_test[kind]) / np.mean(self.n_train[kind]))
+
+    def compare(self, a: str, b: str, metric: str, *, b_values=None,
+                prob: float = 0.95) -> FoldComparison:
+        """``a`` minus ``b`` fold by fold by :data:`FOLD_RULE` (:func:`fold_comparison`):
+        the corrected interval with this study's fold sizes, and the TOST against a margin
+        of :data:`FOLD_MARGIN` times ``b``'s mean over the folds. ``b_values``: ``b``'s
+        per-fold values when ``b`` is not in the study (e.g. the natural-feature filter's
+        :func:`fold_values`), (n_folds,)."""
+        va = self.per_fold(a, metric)
+        if b_values is None:
+            vb = self.per_fold(b, metric)
+        else:
+            vb = _checks.array(f"b_values ({b})", b_values)
+            if vb.shape != va.shape:
+                raise ValueError(f"b_values must have shape {va.shape} (a value per fold), "
+                                 f"got {vb.shape}")
+        kind = FOLD_METRICS[metric][0]
+        return fold_comparison(va, vb, n_test=self.n_test[kind], n_train=self.n_train[kind],
+                               margin=FOLD_MARGIN * float(np.mean(vb)), a=a, b=b,
+                               metric=metric, prob=prob)
 
     def p_value(self, a: str, b: str, metric: str) -> float:
         """Exact sign-flip p-value of ``a`` minus ``b`` over the folds."""
@@ -654,7 +681,7 @@ def fold_study(dataset: Dataset, *, seeds=(0, 1, 2), n_folds: int = 5, gap: floa
     values = {c: {m: np.full(shape, np.nan) for m in FOLD_METRICS} for c in ("ann", "control")}
     histories = {"time": [], "beacons": []}
     ann_cfg = cfg.replace(landmark_model="ann")
-    n_time = []
+    n_time, n_time_test = [], []
     tfolds = {s: ann.time_folds(ts, n_folds, gap=gap, seed=s) for s in seeds}
     for k in range(n_folds):
         histories["time"].append([])
@@ -664,6 +691,7 @@ def fold_study(dataset: Dataset, *, seeds=(0, 1, 2), n_folds: int = 5, gap: floa
             split = tfolds[s][k]
             if j == 0:
                 n_time.append(split.train.size + split.val.size)
+                n_time_test.append(split.test.size)
             for kind, sp in (("time", split), ("beacons", bfolds[k])):
                 model = ann.train(ts, sp, tc)
                 histories[kind][k].append(_history(model))
@@ -682,6 +710,8 @@ def fold_study(dataset: Dataset, *, seeds=(0, 1, 2), n_folds: int = 5, gap: floa
     return FoldStudy(seeds=seeds, gap=float(gap), edges=edges, held_beacons=held, values=values,
                      n_train={"time": np.array(n_time),
                               "beacons": np.array([f.train.size + f.val.size for f in bfolds])},
+                     n_test={"time": np.array(n_time_test),
+                             "beacons": np.array([f.test.size for f in bfolds])},
                      n_train_if_beacons_held=ann.beacon_holdout_sizes(ts, n_folds, gap=gap),
                      histories=histories)
 

@@ -4,9 +4,9 @@ A slider that moves a marker over fixed axes need not draw the axes again: the f
 drawn in full once (laid out, ticks, labels, the lines that never change), that picture is
 kept, and each step puts it back and draws the moving artists over it - the technique of
 matplotlib's own animations (``FuncAnimation(blit=True)``). In chapter 08's explorer a step
-fell from 0.49 s (a whole three-panel figure with log axes drawn again) to 0.035 s, of which
-the PNG encoding is 0.022 s (one process, this machine; ``benchmarks/bench_notebooks.py``
-measures steps in the kernel).
+costs a fraction of a whole redraw (a three-panel figure with log axes drawn again), and
+most of what is left is the PNG encoding (``benchmarks/bench_notebooks.py`` measures steps
+in the kernel).
 
 The caller promises what blitting needs: nothing but the moving artists changes between
 steps, and the moving artists stay within views that do not change (fixed limits), so the

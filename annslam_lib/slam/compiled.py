@@ -14,15 +14,16 @@ teach; this loop is a fast copy of it, listed with the other copies in
 Why a compiled loop: the numpy gating does about fifty vector operations per scan over a
 few hundred landmarks, each costing its call overhead (about a microsecond) more than its
 arithmetic: on Victoria Park (7248 scans, 335 landmarks) about a quarter of the run. One
-compiled loop does the same arithmetic in one call. Measured (2-core Xeon, one thread, two
-sessions): the loop saves 55-65 us a scan on Victoria Park (up to 335 landmarks) and about
-35-45 us on the Car Park (15), while a process pays about 0.27 s CPU once to import numba
-(0.12-0.14 s) and load the cached machine code (0.14-0.15 s), about 0.3 s more the first
-time on a machine (compiling it). Break-even is thus near 5000 scans of a Victoria Park-sized
-map (more for smaller maps: the saving grows with the landmarks): :func:`use_compiled`
-switches the loop on for runs at least :data:`MIN_SCANS` long (Victoria Park; not the Car
-Park's 586 scans nor the simulator's runs), so that a chapter without such a run never
-imports numba.
+compiled loop does the same arithmetic in one call. Measured on a 2-core Xeon, one thread
+(for Victoria Park, ``benchmarks/bench_ekf_slam.py --against HEAD`` times the whole run with
+the loop and, in its ``numpy`` row, without it): the loop saves 55-65 us a scan on Victoria
+Park (up to 335 landmarks) and about 35-45 us on the Car Park (15), while a process pays
+about 0.27 s CPU once to import numba (0.12-0.14 s) and load the cached machine code
+(0.14-0.15 s), about 0.3 s more the first time on a machine (compiling it). Break-even is
+thus near 5000 scans of a Victoria Park-sized map (more for smaller maps: the saving grows
+with the landmarks): :func:`use_compiled` switches the loop on for runs at least
+:data:`MIN_SCANS` long (Victoria Park; not the Car Park's 586 scans nor the simulator's
+runs), so that a chapter without such a run never imports numba.
 
 ``ANNSLAM_KERNEL=numpy`` in the environment switches it off everywhere (the grader's sandbox
 does: it runs student code, which must not share a cache of compiled code with the course;
@@ -166,7 +167,7 @@ def gating_kernel():
                           stacklevel=2)
             try:
                 _kernel = _compiled(numba, cache=False)
-            except Exception as exc2:      # pragma: no cover - numba broken on this machine
+            except Exception as exc2:      # pragma: no cover - numba installed but broken
                 _failed = (f"numba could not compile the gating ({type(exc2).__name__}: "
                            f"{exc2})")
         return _kernel

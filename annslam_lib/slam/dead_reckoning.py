@@ -169,7 +169,7 @@ def initial_pose_from_gps(odometry: Odometry, gps: Gps, vehicle: Vehicle, *,
     theta = atan2(sum d_i x g_i, sum d_i . g_i) (a one-angle Procrustes problem).
     The pose at ``odometry.t[0]`` is then (gps_g - R(theta) D(t_g), theta).
 
-    Robust (issue 13): the fixes of the window are first fitted about their centroids
+    Robust: the fixes of the window are first fitted about their centroids
     (position and heading free) and a fix whose residual exceeds 3 robust standard
     deviations of the residuals (1.4826 MAD) and at least ``outlier_floor`` m (a gross error:
     a receiver's ordinary scatter stays in), is left out;

@@ -157,8 +157,13 @@ class SmoothingResult:
     whitened residuals / 2) at the values LM started from (batch) or at the problem's
     initial values, the EKF's estimate (iSAM2, whose own start is built pose by pose), and
     at the solution; iterations (batch) or updates
-    (iSAM2); step_cpu: iSAM2's CPU seconds per update (empty for batch), step_landmarks:
-    the landmarks in the graph at each update."""
+    (iSAM2); step_cpu: iSAM2's CPU seconds per update, ``isam.update`` alone (empty for
+    batch), step_landmarks: the landmarks in the graph at each update; node_cpu (K,) (iSAM2):
+    the whole CPU seconds of each pose's turn of the loop (its factors and start values, the
+    update when it ends a block, reading the estimate; pose 0's turn also holds the set-up
+    before the loop), empty for batch; filtered (K, 3) (iSAM2): each pose as iSAM2 estimated
+    it right after the first update that held it (with ``every = 1``, the filtered estimate:
+    only the data up to that pose), empty for batch. ``poses`` is the final, smoothed one."""
 
     estimator: str
     t: np.ndarray
@@ -170,6 +175,8 @@ class SmoothingResult:
     iterations: int
     step_cpu: np.ndarray = field(default_factory=lambda: np.empty(0))
     step_landmarks: np.ndarray = field(default_factory=lambda: np.empty(0, np.int64))
+    node_cpu: np.ndarray = field(default_factory=lambda: np.empty(0))
+    filtered: np.ndarray = field(default_factory=lambda: np.empty((0, 3)))
 
     @property
     def trajectory(self) -> np.ndarray:
@@ -240,6 +247,10 @@ def solve_isam2(problem: GraphProblem, *, relinearize_threshold: float = 0.1,
     their factors; a new pose starts at the previous pose's current estimate moved by the
     odometry, a new landmark at its first detection seen from there
     (``observation.inverse_observe``). factorization 'QR' (default) or 'CHOLESKY'.
+    Besides the final (smoothed) solution, the result keeps each pose's estimate right
+    after the update that first held it (``filtered``: with ``every = 1`` what iSAM2 knew
+    of that pose at its own time, as a filter would) and each pose's whole CPU
+    (``node_cpu``; chapter 10 times it against the EKF scan by scan).
     Needs a prior on the first pose (ValueError): iSAM2 solves from its first update on, and
     a first pose held by a GPS position alone has a free heading there (``solve_batch``
     takes a graph fixed by GPS fixes alone). Raises :class:`SolverError` if an update finds
@@ -268,6 +279,8 @@ def solve_isam2(problem: GraphProblem, *, relinearize_threshold: float = 0.1,
                               else problem.initial_poses[0], float)
     step_cpu, step_lm, all_factors = [], [], g.NonlinearFactorGraph()
     K = problem.n_poses
+    filtered, node_end = np.empty((K, 3)), np.empty(K)
+    block = 0                                   # the first pose not yet updated
     for k in range(K):
         if k > 0:
             guess = last = compose(last, problem.odometry[k - 1])
@@ -281,6 +294,7 @@ def solve_isam2(problem: GraphProblem, *, relinearize_threshold: float = 0.1,
                 lm, _, _ = inverse_observe(guess, problem.obs_z[i])
                 values.insert(landmark_key(j), g.Point2(*lm))
         if (k + 1) % every and k < K - 1:
+            node_end[k] = time.process_time()
             continue
         s0 = time.process_time()
         try:
@@ -291,10 +305,15 @@ def solve_isam2(problem: GraphProblem, *, relinearize_threshold: float = 0.1,
         step_lm.append(int(known.sum()))
         all_factors.push_back(graph)
         graph, values = g.NonlinearFactorGraph(), g.Values()
-        p = isam.calculateEstimatePose2(pose_key(k))
-        last = np.array([p.x(), p.y(), p.theta()])
+        for i in range(block, k + 1):           # the estimate now, before any later data
+            p = isam.calculateEstimatePose2(pose_key(i))
+            filtered[i] = p.x(), p.y(), p.theta()
+        block = k + 1
+        last = filtered[k].copy()
+        node_end[k] = time.process_time()
     sol = isam.calculateEstimate()
     cpu = time.process_time() - c0
+    node_cpu = np.diff(node_end, prepend=c0)
     P, Lm = _read(g, sol, K, problem.n_landmarks)
     init = g.Values()
     for k in range(K):
@@ -303,7 +322,8 @@ def solve_isam2(problem: GraphProblem, *, relinearize_threshold: float = 0.1,
         init.insert(landmark_key(j), g.Point2(*problem.initial_landmarks[j]))
     return SmoothingResult("isam2", problem.t.copy(), P, Lm, cpu,
                            float(all_factors.error(init)), float(all_factors.error(sol)),
-                           len(step_cpu), np.array(step_cpu), np.array(step_lm, dtype=np.int64))
+                           len(step_cpu), np.array(step_cpu), np.array(step_lm, dtype=np.int64),
+                           node_cpu, filtered)
 
 
 def marginals(problem: GraphProblem, result: SmoothingResult) -> tuple[np.ndarray, np.ndarray]:
