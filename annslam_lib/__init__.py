@@ -1,20 +1,28 @@
 """annslam_lib: the library behind the annslam course on EKF-SLAM for a car-like vehicle
-with an ANN landmark model. Folders are layers, bottom to top:
+with an ANN landmark model. Folders are layers, bottom to top (:data:`LAYERS`); a module
+imports only from its own layer and the layers below it:
 
-- ``data``: records, the registry of real runs, download, loaders, the simulator
 - ``models``: geometry, the vehicle, motion and observation models, uncertainty
+- ``data``: records, the registry of real runs, download, loaders, the simulator
 - ``perception``: beacons and trees from sensor data, data association
-- ``slam``: the EKF (efficient and dense), its configuration, the run loop, results
+- ``slam``: the EKF (efficient and dense), its configuration, the run loop, dead reckoning
 - ``evaluation``: trajectory and map errors, consistency, the run summary, timing
 - ``ann``: the landmark network (training set, network, save/load, evaluation)
-- ``paper``: the paper's printed equations, the errata, the study and the report
 - ``plots``: one style module and the shared figures
+- ``smoothing``: the same run as a factor graph, and the EKF compared with it
+- ``paper``: the paper's printed equations, the errata, the study, its figures and report
 - ``chapters``: one companion module per notebook (explorers, chapter-only figures)
 - ``grading``: the exercises' checks
 - ``course``: release, grading, the student workspace, the command line
 
-Importing this package imports nothing heavy: each layer loads when it is used.
+Below every layer: ``_checks`` (input validation), ``_settings`` (every ``ANNSLAM_*``
+environment variable), ``_lazy`` and ``_cache`` (the study cache). Importing this package imports nothing heavy: each layer loads when it is used.
 """
+
+#: The layers, bottom to top: the one statement of the order (README.md, MAINTAINING.md and
+#: tests/test_layout.py read it).
+LAYERS = ("models", "data", "perception", "slam", "evaluation", "ann", "plots", "smoothing",
+          "paper", "chapters", "grading", "course")
 
 
 def __getattr__(name: str):

@@ -52,6 +52,8 @@ from pathlib import Path
 
 import numpy as np
 
+from . import _settings
+
 __all__ = ["memoize", "cache_dir", "class_cache_dir", "clear", "key_of", "code_hash", "STATS"]
 
 #: Per process: hits, class_hits (read from the class's folder), misses (computed and
@@ -67,21 +69,20 @@ _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 def cache_dir() -> Path | None:
     """The cache folder, or None when ``ANNSLAM_CACHE=off``."""
-    env = os.environ.get("ANNSLAM_CACHE", "")
-    if env.lower() == "off":
+    if _settings.cache_off():
         return None
-    if env:
-        return Path(env).expanduser()
+    folder = _settings.cache_folder()
+    if folder is not None:
+        return folder
     import platformdirs
     return Path(platformdirs.user_cache_dir("annslam")) / "studies"
 
 
 def class_cache_dir() -> Path | None:
     """The class's read-only study folder (``ANNSLAM_CLASS_CACHE``), or None."""
-    env = os.environ.get("ANNSLAM_CLASS_CACHE", "")
-    if not env or os.environ.get("ANNSLAM_CACHE", "").lower() == "off":   # off: every cache
+    if _settings.cache_off():                      # off: every cache
         return None
-    return Path(env).expanduser()
+    return _settings.class_cache_folder()
 
 
 def _closed(st, *, sticky_ok: bool = False) -> bool:

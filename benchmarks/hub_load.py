@@ -30,8 +30,8 @@ import time
 from pathlib import Path
 
 from annslam_lib.course.hub import HubLayout
-from annslam_lib.course.hub_client import launch, remove_accounts
-from annslam_lib.course.hub_setup import PREPARED
+from annslam_lib.course.hub.client import launch, remove_accounts
+from annslam_lib.course.hub.setup import PREPARED
 
 ROOT = Path(__file__).resolve().parents[1]
 PAGE = os.sysconf("SC_PAGE_SIZE")

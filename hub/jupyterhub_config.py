@@ -1,9 +1,9 @@
 # JupyterHub configuration of a class hub, started by ./course.sh hub (python -m annslam_lib
 # hub), which prepares the hub folder and passes the settings in ANNSLAM_HUB_* variables:
-# annslam_lib/course/hub_config.py says what each one is, and how to swap the authenticator
+# annslam_lib/course/hub/config.py says what each one is, and how to swap the authenticator
 # (a university's OAuth or LTI login) or the spawner (DockerSpawner, or KubeSpawner through
 # Zero to JupyterHub: hub/z2jh/config.yaml).
-from annslam_lib.course.hub_config import check_spawner, configure
+from annslam_lib.course.hub.config import check_spawner, configure
 
 c = get_config()  # noqa: F821 (JupyterHub's config loader defines it)
 configure(c)

@@ -1,5 +1,5 @@
 """The class hub for the tests: the folder ``./course.sh test`` prepared (a skip that says
-why where there is none), started with :func:`annslam_lib.course.hub_client.launch`."""
+why where there is none), started with :func:`annslam_lib.course.hub.client.launch`."""
 from __future__ import annotations
 
 import os
@@ -7,7 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from annslam_lib.course import hub, hub_setup
+from annslam_lib.course import hub
+from annslam_lib.course.hub import setup as hub_setup
 
 HUB_DIR = Path(os.environ.get("ANNSLAM_HUB_TEST_DIR") or "/tmp/annslam-hub-test")
 

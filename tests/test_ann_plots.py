@@ -10,6 +10,7 @@ import pytest
 from annslam_lib import ann
 from annslam_lib.models.observation import inverse_observe
 from annslam_lib.plots import ann as ann_plots
+from widget_support import close_figures  # noqa: F401
 
 
 def _synthetic_set(n_scans: int = 120, bias: float = 0.3, seed: int = 7) -> ann.TrainingSet:
@@ -42,12 +43,6 @@ def fitted():
     sp = ann.chronological_split(ts)
     model = ann.train(ts, sp, ann.TrainConfig(hidden=(5,), seed=1, max_epochs=60))
     return ts, sp, model
-
-
-@pytest.fixture(autouse=True)
-def _close():
-    yield
-    plt.close("all")
 
 
 def _by_gid(ax, gid, kind="lines"):

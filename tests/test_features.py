@@ -225,7 +225,7 @@ def test_extraction_is_deterministic(car_park):
 
 @pytest.fixture(scope="module")
 def car_residuals(car_park):
-    poses, valid = sources.gps_scan_poses(car_park)
+    poses, valid = dead_reckoning.gps_scan_poses(car_park)
     det = beacons.extract_beacons(car_park.laser)
     return det, poses, valid, beacons.extraction_residuals(det, poses, valid, car_park.beacons)
 
@@ -269,7 +269,7 @@ def test_adding_the_nominal_pole_radius_makes_the_car_park_ranges_long(car_park,
 
 
 def test_clusters_below_one_metre_are_not_beacons(car_park):
-    poses, valid = sources.gps_scan_poses(car_park)
+    poses, valid = dead_reckoning.gps_scan_poses(car_park)
     det = beacons.extract_beacons(car_park.laser, BeaconConfig(min_range=0.0))
     res = beacons.extraction_residuals(det, poses, valid, car_park.beacons)
     close = det.range < 1.0
@@ -280,7 +280,7 @@ def test_clusters_below_one_metre_are_not_beacons(car_park):
 
 def test_gps_scan_poses_on_a_noise_free_simulator():
     ds = simulate.simulate(seed=0, sigma_gps=0.0, sigma_steer=0.0, sigma_speed=0.0, laps=1)
-    poses, valid = sources.gps_scan_poses(ds)
+    poses, valid = dead_reckoning.gps_scan_poses(ds)
     true = ds.info["scan_poses"]
     assert valid.mean() > 0.95 and not valid[0] and not valid[-1]   # standing at start and end
     assert np.max(np.hypot(*(poses[valid, :2] - true[valid, :2]).T)) < 0.01

@@ -16,8 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from annslam_lib.course import confine, hub_setup, integrity, sandbox
+from annslam_lib.course import confine, integrity, sandbox
 from annslam_lib.course.hub import HubError
+from annslam_lib.course.hub import setup as hub_setup
 from annslam_lib.course.plan import static_forbidden
 from annslam_lib.grading.core import watch_calls
 from annslam_lib.models import observation

@@ -28,7 +28,7 @@ from types import SimpleNamespace
 import pytest
 
 from annslam_lib.course import sandbox
-from annslam_lib.course.hub_class import feedback_page
+from annslam_lib.course.hub.classroom import feedback_page
 from annslam_lib.data import fetch
 
 import grading_support as gs

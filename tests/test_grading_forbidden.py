@@ -42,7 +42,7 @@ CASES = [
     (gkf.check_steady_state, "01a", "my_steady_state",
      lambda q, r: kalman.steady_state_variance(q, r)[1], "slam.kalman.steady_state_variance"),
     (gkf.check_kalman_gain, "01a", "my_kalman_gain",
-     lambda P, H, R: dense.kalman_gain(P, H, R)[0], "slam.dense.kalman_gain"),
+     lambda P, H, R: dense.kalman_gain(P, H, R)[0], "slam.kalman.kalman_gain"),
     (gkf.check_gate, "01a", "my_gate",
      lambda nu, S, p: kalman.innovation_gate(nu, S, p)[2], "slam.kalman.innovation_gate"),
     (gkin.check_axle_pose, "02", "my_axle_pose",
@@ -64,7 +64,7 @@ CASES = [
     (gloc.check_nis_verdict, "04a", "my_nis_verdict",
      lambda nis, dof, p: localisation.nis_verdict(nis, dof, p)[0], "slam.localisation.nis_verdict"),
     (ge.check_joseph_covariance, "05", "my_joseph_covariance",
-     lambda P, H, R, K: dense.joseph_covariance(P, H, R, K), "slam.dense.joseph_covariance"),
+     lambda P, H, R, K: dense.joseph_covariance(P, H, R, K), "slam.kalman.joseph_covariance"),
     (gm.check_gps_outliers, "06", "my_gps_outliers",
      lambda t, xy, m=10.0, tol=3.0: trajectory.gps_outliers(
          trajectory.Gps(t=t, east=xy[:, 0], north=xy[:, 1]), m, tol),

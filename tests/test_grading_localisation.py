@@ -9,23 +9,14 @@ import pytest
 from scipy.stats import chi2
 
 from annslam_lib.course.sandbox import Limits
-from annslam_lib.grading import GradingError
 from annslam_lib.grading import localisation as gl
 from annslam_lib.models.observation import observe
 from solutions import ROOT, solution
+from check_support import fails, wrap
 
 import grading_support as gs
 
 NOTEBOOK = ROOT / "notebooks" / "04a_ekf_localisation.ipynb"
-
-
-def wrap(a):
-    return (a + np.pi) % (2 * np.pi) - np.pi
-
-
-def fails(check, fn, match):
-    with pytest.raises(GradingError, match=match):
-        check(fn, quiet=True)
 
 
 # ----------------------------------------------------------------------------- 4a.1

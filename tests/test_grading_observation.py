@@ -12,6 +12,7 @@ from annslam_lib.grading.core import full_feedback
 from annslam_lib.grading import observation as gk
 from annslam_lib.models import observation
 from solutions import solution
+from check_support import stub, wrap
 
 
 def quiet(check, fn, **kw):
@@ -20,14 +21,6 @@ def quiet(check, fn, **kw):
     with warnings.catch_warnings(), full_feedback():
         warnings.simplefilter("ignore", RuntimeWarning)
         return check(fn, quiet=True, **kw)
-
-
-def stub(*args):
-    raise NotImplementedError()
-
-
-def wrap(a):
-    return (a + np.pi) % (2 * np.pi) - np.pi
 
 
 # ----------------------------------------------------------------------- the notebook's solutions

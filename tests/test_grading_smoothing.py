@@ -12,17 +12,9 @@ from annslam_lib.grading.core import full_feedback
 from annslam_lib.grading import smoothing as gsm
 from annslam_lib.models.observation import observe
 from solutions import solution
+from check_support import fails, wrap
 
 X, L = gtsam.symbol_shorthand.X, gtsam.symbol_shorthand.L
-
-
-def wrap(a):
-    return (a + np.pi) % (2 * np.pi) - np.pi
-
-
-def fails(check, fn, match):
-    with pytest.raises(GradingError, match=match):
-        check(fn, quiet=True)
 
 
 # ----------------------------------------------------------------------------- 10.1

@@ -15,8 +15,8 @@ from hub_support import prepared_layout
 from browser_support import launch_chromium, why_no_browser
 from hub_browser import Student, cell_index, solution_source
 
-from annslam_lib.course import hub_setup
-from annslam_lib.course.hub_client import launch, remove_accounts
+from annslam_lib.course.hub import setup as hub_setup
+from annslam_lib.course.hub.client import launch, remove_accounts
 
 ROOT = hub_setup.ROOT
 PRIVATE = [ROOT / "notebooks", ROOT / "tests"]

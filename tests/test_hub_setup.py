@@ -16,7 +16,9 @@ import nbformat
 import pytest
 from traitlets.config import Config
 
-from annslam_lib.course import hub, hub_config, hub_setup, release, workspace
+from annslam_lib.course import hub, release, workspace
+from annslam_lib.course.hub import config as hub_config
+from annslam_lib.course.hub import setup as hub_setup
 
 ROOT = Path(__file__).resolve().parents[1]
 COURSE = sorted((ROOT / "notebooks").glob("*.ipynb"))
@@ -421,7 +423,7 @@ def test_only_root_may_prepare_a_hub(tmp_path, monkeypatch):
 def test_a_submission_that_breaks_grading_gets_its_reason_and_the_others_are_graded(tmp_path):
     """``class grade`` over a good and a corrupt submission: the corrupt one is named with
     its reason, the good one scored, and each gets its feedback page."""
-    from annslam_lib.course import hub_class
+    from annslam_lib.course.hub import classroom as hub_class
 
     chapter = "01_kinematics"
     layout = hub.HubLayout(tmp_path / "hub")
@@ -448,7 +450,7 @@ def test_a_submission_that_breaks_grading_gets_its_reason_and_the_others_are_gra
 
 def test_a_feedback_page_escapes_what_the_student_wrote():
     from annslam_lib.course.grader import ExerciseResult, SubmissionGrade
-    from annslam_lib.course.hub_class import feedback_page
+    from annslam_lib.course.hub.classroom import feedback_page
 
     evil = "<script>alert(1)</script>"
     g = SubmissionGrade("x.ipynb", "01_kinematics.ipynb", f"bob{evil}", "01_kinematics", 0, 2,

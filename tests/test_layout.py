@@ -1,6 +1,6 @@
-"""The library's shape: folders are layers, no import cycles, no module over
-800 lines, every subpackage names what it holds, and the light import paths stay light.
-The cycle check reads the import statements (ast), not a list kept by hand."""
+"""The library's shape: folders are layers imported only downward, no import cycles, no
+module over 800 lines, every subpackage names what it holds, and the light import paths stay
+light. The checks read the import statements (ast), not a list kept by hand."""
 import ast
 import pathlib
 import subprocess
@@ -11,8 +11,8 @@ import pytest
 import annslam_lib
 
 ROOT = pathlib.Path(annslam_lib.__file__).parent
-LAYERS = ["data", "models", "perception", "slam", "evaluation", "ann", "paper", "plots",
-          "chapters", "grading", "course"]
+LAYERS = list(annslam_lib.LAYERS)
+BASE = {"annslam_lib._checks", "annslam_lib._lazy", "annslam_lib._cache", "annslam_lib._settings"}
 
 
 def _modules():
@@ -89,13 +89,134 @@ def test_the_cycle_check_finds_a_planted_cycle(tmp_path, monkeypatch):
         test_no_import_time_cycles()
 
 
+def _all_imports(name: str, path: pathlib.Path) -> list[tuple[int, str]]:
+    """Every ``annslam_lib`` import of a module, at any depth (a function-level import is a
+    dependency too), as (line, imported module or name)."""
+    pkg = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
+    out = []
+    for n in ast.walk(ast.parse(path.read_text())):
+        if isinstance(n, ast.Import):
+            out += [(n.lineno, a.name) for a in n.names]
+        elif isinstance(n, ast.ImportFrom):
+            base = n.module or ""
+            if n.level:
+                up = pkg.split(".")[: len(pkg.split(".")) - (n.level - 1)]
+                base = ".".join(up + ([base] if base else []))
+            out += [(n.lineno, base)] + [(n.lineno, f"{base}.{a.name}") for a in n.names]
+    return [(line, m) for line, m in out if m.startswith("annslam_lib.")]
+
+
+def _rank(module: str) -> int | None:
+    """A module's height: -1 for the base modules every layer may use, the index in
+    LAYERS for a layer's module, None for the package's own top (``__main__``)."""
+    if module in BASE:
+        return -1
+    part = module.split(".")[1]
+    return LAYERS.index(part) if part in LAYERS else None
+
+
+def test_every_import_runs_down_the_layers():
+    upward = []
+    for name, path in _modules().items():
+        if name.count(".") == 0:
+            continue
+        src = _rank(name)
+        if src is None:
+            continue
+        for line, target in _all_imports(name, path):
+            dst = _rank(target)
+            if dst is not None and dst > src:
+                upward.append(f"{name}:{line} -> {target}")
+    assert upward == []
+
+
+def test_the_direction_check_finds_a_planted_upward_import(tmp_path, monkeypatch):
+    pkg = tmp_path / "annslam_lib"
+    for layer in ("models", "slam"):
+        (pkg / layer).mkdir(parents=True)
+        (pkg / layer / "__init__.py").write_text("")
+    (pkg / "__init__.py").write_text("")
+    (pkg / "slam" / "x.py").write_text("from ..models import y\n")            # down: allowed
+    (pkg / "models" / "y.py").write_text("def f():\n    from ..slam import x\n")  # up, lazily
+    monkeypatch.setattr(sys.modules[__name__], "ROOT", pkg)
+    with pytest.raises(AssertionError, match="annslam_lib.models.y:2 -> annslam_lib.slam"):
+        test_every_import_runs_down_the_layers()
+
+
+def _private_uses(name: str, path: pathlib.Path, modules) -> list[str]:
+    """Another library module's private names used by ``name``: imported (``from .x import
+    _y``) or read off an imported module (``x._y``). The base modules ``_checks``, ``_settings``,
+    ``_lazy`` and ``_cache`` are the package's own and may be imported whole."""
+    tree = ast.parse(path.read_text())
+    pkg = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
+    aliases, found = {}, []
+    for n in ast.walk(tree):
+        if isinstance(n, ast.ImportFrom):
+            base = n.module or ""
+            if n.level:
+                up = pkg.split(".")[: len(pkg.split(".")) - (n.level - 1)]
+                base = ".".join(up + ([base] if base else []))
+            if not base.startswith("annslam_lib") or base == name:
+                continue
+            for a in n.names:
+                full = f"{base}.{a.name}"
+                if full in modules:
+                    aliases[a.asname or a.name] = full
+                elif a.name.startswith("_") and not a.name.startswith("__"):
+                    found.append(f"{name}:{n.lineno} imports {full}")
+        elif isinstance(n, ast.Import):
+            for a in n.names:
+                if a.name in modules and a.asname:
+                    aliases[a.asname] = a.name
+    for n in ast.walk(tree):
+        if (isinstance(n, ast.Attribute) and isinstance(n.value, ast.Name)
+                and n.value.id in aliases and aliases[n.value.id] != name
+                and n.attr.startswith("_") and not n.attr.startswith("__")):
+            found.append(f"{name}:{n.lineno} reads {aliases[n.value.id]}.{n.attr}")
+    return found
+
+
+def test_no_module_uses_another_modules_private_names():
+    mods = _modules()
+    found = [f for m, p in mods.items() for f in _private_uses(m, p, mods)]
+    assert found == []
+
+
+def test_the_private_name_check_finds_planted_uses(tmp_path):
+    pkg = tmp_path / "annslam_lib"
+    (pkg / "a").mkdir(parents=True)
+    for f in ("__init__.py", "a/__init__.py"):
+        (pkg / f).write_text("")
+    (pkg / "a" / "x.py").write_text("_hidden = 1\n")
+    (pkg / "a" / "y.py").write_text("from .x import _hidden\nfrom . import x\nv = x._hidden\n")
+    mods = {"annslam_lib.a.x": pkg / "a" / "x.py", "annslam_lib.a.y": pkg / "a" / "y.py",
+            "annslam_lib.a": pkg / "a" / "__init__.py"}
+    assert _private_uses("annslam_lib.a.y", mods["annslam_lib.a.y"], mods) == [
+        "annslam_lib.a.y:1 imports annslam_lib.a.x._hidden",
+        "annslam_lib.a.y:3 reads annslam_lib.a.x._hidden"]
+
+
+def test_the_order_is_written_once_and_repeated_where_readers_look():
+    chain = " < ".join(LAYERS)
+    for doc in ("README.md", "MAINTAINING.md"):
+        assert chain in (ROOT.parent / doc).read_text(), doc
+    listed = [line.split("``")[1] for line in annslam_lib.__doc__.splitlines()
+              if line.startswith("- ``")]
+    assert listed == LAYERS
+    table = [line.split("`")[1] for line in (ROOT.parent / "MAINTAINING.md").read_text().splitlines()
+             if line.startswith("| `") and line.split("`")[1] in LAYERS]
+    assert table == LAYERS
+    assert sorted(LAYERS) == sorted(p.parent.name for p in ROOT.glob("*/__init__.py"))
+
+
 def test_no_module_over_800_lines_and_layers_are_folders():
     sizes = {m: len(p.read_text().splitlines()) for m, p in _modules().items()}
     assert max(sizes.values()) <= 800, max(sizes.items(), key=lambda kv: kv[1])
     for layer in LAYERS:
         assert (ROOT / layer / "__init__.py").is_file(), layer
     loose = sorted(p.name for p in ROOT.glob("*.py"))
-    assert loose == ["__init__.py", "__main__.py", "_cache.py", "_checks.py", "_lazy.py"]
+    assert loose == ["__init__.py", "__main__.py", "_cache.py", "_checks.py", "_lazy.py",
+                     "_settings.py"]
 
 
 @pytest.mark.parametrize("layer", LAYERS)
@@ -139,3 +260,28 @@ def test_chapters_before_the_ann_do_not_import_torch():
             "    print(c, 'torch' in sys.modules)")
     out = _fresh(code)
     assert out == [w for c in BEFORE_THE_ANN for w in (c, "False")], out
+
+
+def test_every_subpackage_names_each_of_its_modules():
+    # Each module and subpackage of a package (private ``_x`` ones aside) is named as
+    # ``name`` in the package's docstring and listed in its ``__all__``.
+    import importlib
+
+    missing = []
+    for init in sorted(ROOT.rglob("__init__.py")):
+        folder = init.parent
+        if folder == ROOT:
+            continue
+        package = ".".join(folder.relative_to(ROOT.parent).parts)
+        members = sorted({p.stem for p in folder.glob("*.py")} - {"__init__"}
+                         | {p.parent.name for p in folder.glob("*/__init__.py")})
+        doc = ast.get_docstring(ast.parse(init.read_text())) or ""
+        listed = set(getattr(importlib.import_module(package), "__all__", ()))
+        for m in members:
+            if m.startswith("_"):
+                continue
+            if f"``{m}``" not in doc:
+                missing.append(f"{package}: {m} not in the docstring")
+            if m not in listed:
+                missing.append(f"{package}: {m} not in __all__")
+    assert missing == []

@@ -14,7 +14,7 @@ from annslam_lib.models.vehicle import ACFR_UTE
 from annslam_lib.slam import stretches
 from annslam_lib.slam.dense import DenseEkfSlam
 from annslam_lib.slam.efficient import EkfSlam
-from annslam_lib.slam.runner import _events
+from annslam_lib.slam.runner import event_schedule
 
 
 def _schedule(seed: int):
@@ -51,7 +51,7 @@ def _both_loops(odo, gps_t, scan_t, motion_model, fej, check_each=True):
     partial step to its time) and the stretches, side by side on two filters, with the
     same event action; returns what each did."""
     rows = control_table(odo, ACFR_UTE, 0.7, math.radians(7), 0.1)
-    ev_t, ev_code, _, ev_k = _events(odo.t, gps_t, scan_t)
+    ev_t, ev_code, _, ev_k = event_schedule(odo.t, gps_t, scan_t)
     legs = stretches.compound(odo.t, np.array(rows), ev_t, ev_k, ACFR_UTE,
                               motion_model == "midpoint")
     ref, new = _filter(EkfSlam, fej, motion_model), _filter(EkfSlam, fej, motion_model)
@@ -156,7 +156,7 @@ def test_replayed_steps_are_the_loops_steps():
     predict_many loop ends."""
     odo, gps_t, scan_t = _schedule(4)
     controls = control_table(odo, ACFR_UTE, 0.7, math.radians(7))
-    ev_t, _, _, ev_k = _events(odo.t, gps_t, scan_t)
+    ev_t, _, _, ev_k = event_schedule(odo.t, gps_t, scan_t)
     legs = stretches.compound(odo.t, np.array(controls), ev_t, ev_k, ACFR_UTE, False)
     a, b = _filter(DenseEkfSlam), _filter(DenseEkfSlam)
     for s in range(len(ev_t) + 1):
@@ -188,7 +188,7 @@ def test_a_stretch_without_steps_changes_nothing():
 def test_malformed_schedules_are_refused():
     odo, gps_t, scan_t = _schedule(0)
     controls = np.array(control_table(odo, ACFR_UTE, 0.7, 0.1))
-    ev_t, _, _, ev_k = _events(odo.t, gps_t, scan_t)
+    ev_t, _, _, ev_k = event_schedule(odo.t, gps_t, scan_t)
     ev_t, ev_k, t = np.asarray(ev_t), np.asarray(ev_k), odo.t
     cases = [
         ((t, controls[:-1], ev_t, ev_k), "equal lengths"),

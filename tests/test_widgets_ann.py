@@ -11,6 +11,7 @@ from annslam_lib import ann
 from annslam_lib.ann import evaluation
 from annslam_lib.chapters import ch07_ann_training as ch07
 from layout_support import assert_kept_layouts_clear  # noqa: E402
+from widget_support import close_figures  # noqa: F401
 
 
 
@@ -39,12 +40,6 @@ def ts():
 def grid(ts):
     cfg = ann.TrainConfig(max_epochs=25)
     return evaluation.hidden_size_grid(ts, hidden=(1, 4), seeds=(0, 2), config=cfg), cfg
-
-
-@pytest.fixture(autouse=True)
-def _close():
-    yield
-    plt.close("all")
 
 
 def test_grid_holds_the_numbers_of_independent_training(ts, grid):

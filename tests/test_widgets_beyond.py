@@ -7,18 +7,12 @@ import matplotlib
 
 matplotlib.use("Agg")
 
-import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from annslam_lib.chapters import ch10_beyond_ekf as ch  # noqa: E402
 from annslam_lib.smoothing import solve as gs  # noqa: E402
 from layout_support import assert_kept_layouts_clear  # noqa: E402
-
-
-@pytest.fixture(autouse=True)
-def _close_figures():
-    yield
-    plt.close("all")
+from widget_support import close_figures  # noqa: F401
 
 
 @pytest.fixture(scope="module")

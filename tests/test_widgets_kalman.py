@@ -9,20 +9,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from annslam_lib.chapters import ch01a_kalman_filter as ch  # noqa: E402
 from layout_support import assert_kept_layouts_clear  # noqa: E402
-
-
-@pytest.fixture(autouse=True)
-def _close_figures():
-    yield
-    plt.close("all")
-
-
-def move(widget, **values):
-    for c in widget.children:
-        if getattr(c, "description", None) in values:
-            c.value = values[c.description]
-    widget.update()
-    return widget.holder["summary"]
+from widget_support import close_figures, move  # noqa: F401
 
 
 @pytest.mark.parametrize("prior_var, z, meas_var", [(0.34, 12.4, 0.16), (2.0, 9.0, 0.02),

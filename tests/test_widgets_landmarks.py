@@ -14,15 +14,10 @@ from annslam_lib.perception.association import NEW, REJECTED  # noqa: E402
 from annslam_lib.chapters import ch04_landmarks as ch04
 from annslam_lib.data import simulate
 from annslam_lib.perception import beacons
-from annslam_lib.perception import sources
+from annslam_lib.slam import dead_reckoning
 from layout_support import assert_kept_layouts_clear  # noqa: E402
+from widget_support import close_figures  # noqa: F401
   # noqa: E402
-
-
-@pytest.fixture(autouse=True)
-def _close_figures():
-    yield
-    plt.close("all")
 
 
 def test_summary_agrees_with_the_whole_run_extraction(car_park):
@@ -35,7 +30,7 @@ def test_summary_agrees_with_the_whole_run_extraction(car_park):
 
 
 def test_summary_reference_residuals_agree_with_the_whole_run_check(car_park):
-    poses, valid = sources.gps_scan_poses(car_park)
+    poses, valid = dead_reckoning.gps_scan_poses(car_park)
     det = beacons.extract_beacons(car_park.laser)
     whole = beacons.extraction_residuals(det, poses, valid, car_park.beacons)
     for k in (9, 92, 130, 320):

@@ -4,27 +4,13 @@ import matplotlib
 
 matplotlib.use("Agg")
 
-import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from annslam_lib.chapters import ch04a_localisation as ch  # noqa: E402
 from annslam_lib.evaluation.trajectory import trajectory_errors  # noqa: E402
 from annslam_lib.slam import localisation  # noqa: E402
 from layout_support import assert_kept_layouts_clear  # noqa: E402
-
-
-@pytest.fixture(autouse=True)
-def _close_figures():
-    yield
-    plt.close("all")
-
-
-def move(widget, **values):
-    for c in widget.children:
-        if getattr(c, "description", None) in values:
-            c.value = values[c.description]
-    widget.update()
-    return widget.holder["summary"]
+from widget_support import close_figures, move  # noqa: F401
 
 
 def test_the_explorer_shows_the_run_on_the_edited_map(car_park):

@@ -11,14 +11,9 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from annslam_lib.chapters import ch03_observation as ch03
 from layout_support import assert_kept_layouts_clear  # noqa: E402
+from widget_support import close_figures  # noqa: F401
 
   # noqa: E402
-
-
-@pytest.fixture(autouse=True)
-def _close_figures():
-    yield
-    plt.close("all")
 
 
 def reference_measurements(pose, landmark, P, R, n, seed):

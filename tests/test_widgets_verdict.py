@@ -18,9 +18,10 @@ from annslam_lib.slam.config import SlamConfig  # noqa: E402
 from annslam_lib.chapters import ch08_verdict as ch08
 from annslam_lib.evaluation import map as map_eval
 from annslam_lib.paper import study
-from annslam_lib.plots import paper as paper_plots
+from annslam_lib.paper import figures as paper_plots
 from annslam_lib.slam import runner
 from layout_support import assert_kept_layouts_clear  # noqa: E402
+from widget_support import close_figures  # noqa: F401
   # noqa: E402
 
 SCALES = (0.3, 1.0, 3.0)
@@ -29,12 +30,6 @@ SCALES = (0.3, 1.0, 3.0)
 @pytest.fixture(scope="module")
 def sweep(car_park):
     return study.r_scale_sweep(car_park, SCALES, t_heldout=100.0)
-
-
-@pytest.fixture(autouse=True)
-def _close():
-    yield
-    plt.close("all")
 
 
 def test_summary_is_an_independent_run_with_the_scaled_noise(car_park, sweep):

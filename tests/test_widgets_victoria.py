@@ -21,13 +21,8 @@ from annslam_lib.models import uncertainty
 from annslam_lib.slam import config as slam_config
 from annslam_lib.slam import runner
 from layout_support import assert_kept_layouts_clear  # noqa: E402
+from widget_support import close_figures  # noqa: F401
   # noqa: E402
-
-
-@pytest.fixture(autouse=True)
-def _close_figures():
-    yield
-    plt.close("all")
 
 
 @pytest.fixture(scope="module")

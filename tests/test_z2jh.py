@@ -20,7 +20,8 @@ import pytest
 import yaml
 from traitlets.config import Config
 
-from annslam_lib.course import hub, hub_setup
+from annslam_lib.course import hub
+from annslam_lib.course.hub import setup as hub_setup
 
 ROOT = Path(__file__).resolve().parents[1]
 Z2JH = ROOT / "hub" / "z2jh"

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .network import TrainConfig, TrainedModel, _need_torch
+from .network import TrainConfig, TrainedModel, require_torch
 
 try:                                      # torch is the optional 'ann' extra
     import torch
@@ -34,7 +34,7 @@ def save(model: TrainedModel, path) -> Path:
     """Write the model (weights, normalisation, config, history, noise) as plain tensors,
     numbers, strings, lists and dicts with ``torch.save``; :func:`load` reads it back
     with ``weights_only=True``."""
-    _need_torch()
+    require_torch()
     if not isinstance(model, TrainedModel):
         raise TypeError(f"can only save a TrainedModel, got {type(model).__name__}")
     t = lambda a: torch.as_tensor(np.asarray(a, dtype=float))  # noqa: E731
@@ -61,7 +61,7 @@ def load(path) -> TrainedModel:
     :class:`UnsafeModelFile` (no code from it runs). ValueError, naming the problem, for a
     damaged file (a zip CRC that fails, not a model file at all) or implausible values
     (NaN or huge weights, a noise sigma that is not positive and finite)."""
-    _need_torch()
+    require_torch()
     path = Path(path)
     _check_container(path)
     try:

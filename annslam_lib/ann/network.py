@@ -16,7 +16,7 @@ import numpy as np
 
 from ..models.geometry import wrap_angle
 from ..models.observation import observe, observe_values
-from .samples import _COL, FEATURE_NAMES, SPLITS, Split, TrainingSet, encode
+from .samples import COLUMN, FEATURE_NAMES, SPLITS, Split, TrainingSet, encode
 
 try:                                      # torch is the optional 'ann' extra
     import torch
@@ -31,7 +31,7 @@ __all__ = ["ALGORITHMS", "TrainConfig", "TrainedModel", "InverseModel", "train",
 ALGORITHMS = ("lm", "adam")
 
 
-def _need_torch() -> None:
+def require_torch() -> None:
     if torch is None:
         raise ImportError("annslam_lib.ann needs PyTorch, the CPU build: run ./course.sh setup in "
                           "the course folder (it installs torch 2.13.0+cpu)")
@@ -79,7 +79,7 @@ class TrainConfig:
         object.__setattr__(self, "hidden", tuple(int(h) for h in hidden))
         if self.features is not None:
             feats = tuple(self.features)
-            bad = [f for f in feats if f not in _COL]
+            bad = [f for f in feats if f not in COLUMN]
             if bad or not feats or len(set(feats)) != len(feats):
                 raise ValueError(f"TrainConfig.features must be distinct names from {FEATURE_NAMES}, "
                                  f"got {self.features!r}")
@@ -116,7 +116,7 @@ class TrainConfig:
 def _deterministic():
     """One thread and deterministic kernels while inside (restored after): the same
     seed then gives bitwise the same numbers."""
-    _need_torch()
+    require_torch()
     threads, det = torch.get_num_threads(), torch.are_deterministic_algorithms_enabled()
     torch.set_num_threads(1)
     _set_deterministic(True)
@@ -256,9 +256,9 @@ class TrainedModel:
     sigma_bearing: float = math.nan
 
     def __post_init__(self) -> None:
-        _need_torch()
+        require_torch()
         cols = self.config.columns
-        self._cols = np.array([_COL[c] for c in cols])
+        self._cols = np.array([COLUMN[c] for c in cols])
         self._shapes = _shapes(len(cols), self.config.hidden)
         n_par = sum(o * n + o for o, n in self._shapes)
         theta = torch.as_tensor(self.theta, dtype=torch.float64).detach().clone().reshape(-1)
@@ -292,7 +292,7 @@ class TrainedModel:
         """Landmark positions (n, 2): the inverse observation (X's lm_x, lm_y) corrected."""
         X = np.asarray(X, dtype=float)
         c = self.correction(X)
-        return X[:, [_COL["lm_x"], _COL["lm_y"]]] + c
+        return X[:, [COLUMN["lm_x"], COLUMN["lm_y"]]] + c
 
     def pseudo_measurement(self, pose, z, intensity=None, width=None) -> np.ndarray:
         """The EKF's pseudo-measurements z' (n, 2) = h(pose, predicted landmark) for
@@ -323,7 +323,7 @@ class InverseModel:
 
     def predict(self, X) -> np.ndarray:
         X = np.asarray(X, dtype=float)
-        return X[:, [_COL["lm_x"], _COL["lm_y"]]].copy()
+        return X[:, [COLUMN["lm_x"], COLUMN["lm_y"]]].copy()
 
     def pseudo_measurement(self, pose, z, intensity=None, width=None) -> np.ndarray:
         return np.asarray(z, dtype=float).reshape(-1, 2).copy()
@@ -357,7 +357,7 @@ def train(train_set: TrainingSet, split: Split, config: TrainConfig | None = Non
     ``max_fail`` epochs without one, training stops and the best epoch's weights are
     returned. Deterministic (same data and seed -> bitwise the same model).
     """
-    _need_torch()
+    require_torch()
     cfg = TrainConfig() if config is None else config
     if not isinstance(cfg, TrainConfig):
         raise TypeError(f"config must be a TrainConfig, got {type(cfg).__name__}")
@@ -375,7 +375,7 @@ def train(train_set: TrainingSet, split: Split, config: TrainConfig | None = Non
                          "needed (their mean and spread normalise the inputs and outputs); "
                          "a smaller training set cannot train a network")
     t_start = time.perf_counter()
-    cols = np.array([_COL[c] for c in cfg.columns])
+    cols = np.array([COLUMN[c] for c in cfg.columns])
     X = train_set.X[:, cols]
     Y = train_set.Y
     tr = split.train
@@ -487,7 +487,7 @@ def with_features(config: TrainConfig, features) -> TrainConfig:
 @contextlib.contextmanager
 def one_torch_thread():
     """One torch thread while inside (restored after), so that runs repeat to the bit."""
-    _need_torch()
+    require_torch()
 
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
@@ -511,7 +511,7 @@ def forward(X, W1, b1, W2, b2, x_mean, x_std, y_mean, y_std) -> np.ndarray:
             or b2.shape != (2,):
         raise ValueError(f"weights must be W1 (h, {len(FEATURE_NAMES)}), b1 (h,), W2 (2, h), "
                          f"b2 (2,); got {W1.shape}, {b1.shape}, {W2.shape}, {b2.shape}")
-    _need_torch()
+    require_torch()
     theta = np.concatenate([W1.ravel(), b1, W2.ravel(), b2])
     model = TrainedModel(config=TrainConfig(hidden=(h,)), theta=theta, x_mean=x_mean,
                              x_std=x_std, y_mean=y_mean, y_std=y_std)

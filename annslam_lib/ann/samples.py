@@ -30,7 +30,7 @@ USED_STATUS = (STATUS["associated"], STATUS["new"])
 #: Names of the three parts of a :class:`Split`.
 SPLITS = ("train", "val", "test")
 
-_COL = {name: i for i, name in enumerate(FEATURE_NAMES)}
+COLUMN = {name: i for i, name in enumerate(FEATURE_NAMES)}
 
 
 @dataclass(frozen=True)

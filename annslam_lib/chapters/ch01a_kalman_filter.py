@@ -2,7 +2,7 @@
 
 Each experiment is a pure function returning numbers (tested without a notebook); each
 figure draws one of them. The filter's equations themselves live in
-:mod:`annslam_lib.slam.kalman` and :mod:`annslam_lib.slam.dense`.
+:mod:`annslam_lib.slam.kalman`.
 """
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from ..models.uncertainty import ellipse_points
 from ..plots.style import BLUE, GREEN, ORANGE, RED, figure, show_widget_figure, widget_figure
 from ..plots.style import notebook_setup as setup
 from ..slam import kalman
-from ..slam.dense import joseph_covariance, kalman_gain
+from ..slam.kalman import joseph_covariance, kalman_gain
 
 __all__ = ["setup", "one_d_example", "one_d_figure", "random_walk", "random_walk_figure",
            "position_velocity_example", "position_velocity_figure", "suboptimal_gain",

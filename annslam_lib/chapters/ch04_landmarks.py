@@ -19,7 +19,7 @@ from ipywidgets import IntSlider, SelectionSlider, interactive
 from ..perception.association import (NEW, NEW_LANDMARK_PROB, REJECTED, associate,
                                       gate_threshold, mahalanobis)
 from ..perception.beacons import BeaconConfig, beacon_config_for, beacons_from_scan
-from ..perception.sources import gps_scan_poses
+from ..slam.dead_reckoning import gps_scan_poses
 from ..models.geometry import wrap_angle
 from ..models.observation import observe
 from ..plots.style import figure, show_widget_figure, widget_figure
@@ -48,7 +48,7 @@ def beacon_scan_summary(ds: Dataset, k: int, config: BeaconConfig | None = None)
 
     Keys: scan, t, bright_beams (high-intensity beams), beacons (count), z (n, 2), level,
     width, n_beams, beams (first/last beam); and ``reference``: None, or for a run with
-    surveyed beacons and a valid GPS pose at this scan (``features.gps_scan_poses``) a
+    surveyed beacons and a valid GPS pose at this scan (``dead_reckoning.gps_scan_poses``) a
     dict with the surveyed beacons' predicted ``z`` (those 1..30 m away in the 0..pi field
     of view) and ``residuals`` (n, 2) of each beacon against the nearest prediction
     (range m, bearing rad; NaN beyond 1 m)."""

@@ -32,8 +32,7 @@ from ..plots.blit import Blit, drawn_by
 from ..plots.style import BLUE, DPI, FIG_WIDTH, GREEN, ORANGE, PURPLE, RED, figure
 from ..plots.style import notebook_setup as setup
 from ..slam.config import SlamConfig
-from ..slam.dead_reckoning import initial_pose_from_gps
-from ..slam.runner import run
+from ..slam.runner import initial_pose, run
 
 __all__ = ["setup", "fixed_initial_pose", "slam_summary", "slam_explorer", "GATE_OPTIONS",
            "consistency_figure", "nees_comparison_figure", "figure5", "landmark_zooms_figure",
@@ -91,16 +90,9 @@ def judge_study(gate_99: consistency.MonteCarlo, gate_9999: consistency.MonteCar
 def fixed_initial_pose(dataset: Dataset, config: SlamConfig) -> SlamConfig:
     """``config`` with the initial pose it would use on the whole ``dataset`` made
     explicit (so that runs on a truncated dataset start from the same pose)."""
-    policy = config.initial_pose
-    if policy == "auto":
-        policy = "truth" if dataset.truth is not None else "gps"
-    if policy == "truth":
-        pose = dataset.truth.poses[0, 1:4]
-    elif policy == "gps":
-        pose = initial_pose_from_gps(dataset.odometry, dataset.gps, dataset.vehicle,
-                                     window=config.initial_window).pose
-    else:
+    if not isinstance(config.initial_pose, str):
         return config
+    pose, _ = initial_pose(dataset, config)
     return config.replace(initial_pose=tuple(float(v) for v in pose))
 
 

@@ -24,7 +24,8 @@ from ..models.geometry import wrap_angle
 from ..models.observation import observe
 from ..plots.style import BLUE, ORANGE, PALETTE, figure
 from ..plots.style import notebook_setup as setup
-from ..slam.dense import InnovationError, augment_landmark, joseph_update
+from ..slam.base import InnovationError
+from ..slam.dense import augment_landmark, joseph_update
 from .ch09_capstone import reference_associate
 from .harness import Predict, Track, dataset_of, midpoint_step, score_run, steps
 

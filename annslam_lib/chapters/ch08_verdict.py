@@ -23,8 +23,8 @@ from matplotlib.figure import Figure
 from ..data.records import Dataset
 from ..paper.study import SCALES, FoldStudy, Study, r_scale_sweep
 from ..plots.blit import Blit
-from ..plots.paper import (plot_pose_trace, plot_r_scale, plot_transfer, r_scale_moving,
-                           r_scale_trace_limits, set_r_scale)
+from ..paper.figures import (plot_pose_trace, plot_r_scale, plot_transfer, r_scale_moving,
+                            r_scale_trace_limits, set_r_scale)
 from ..plots.slam import CAR_PARK_LIMITS, plot_true_vs_mapped
 from ..plots.style import BLUE, DPI, FIG_WIDTH, RED, figure
 from ..plots.style import notebook_setup as setup

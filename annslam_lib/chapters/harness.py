@@ -169,15 +169,14 @@ def steps(run: str, *, known_map: bool = False):
     ds = dataset_of(run)
     name = "simulated" if run.startswith("sim:") else ds.name
     cfg = SlamConfig.for_dataset(name, gps_mode="none", motion_model="midpoint")
-    from ..slam.runner import _detections, _initial    # the course's own start and detections
+    from ..slam.runner import prepare    # the course's own start and detections
 
-    pose0, _ = _initial(ds, cfg)
-    P0 = np.diag([cfg.initial_sigma_xy**2, cfg.initial_sigma_xy**2, cfg.initial_sigma_phi**2])
-    yield Start(np.asarray(pose0, float), P0, ds.vehicle,
+    prep = prepare(ds, cfg)
+    ds, det = prep.dataset, prep.detections
+    yield Start(np.asarray(prep.pose0, float), prep.cov0, ds.vehicle,
                 np.diag([cfg.sigma_range**2, cfg.sigma_bearing**2]),
                 gate_threshold(cfg.gate_prob), gate_threshold(cfg.new_landmark_prob),
                 np.asarray(ds.beacons, float).copy() if known_map else None)
-    det = _detections(ds, cfg.feature_source)
     odo = ds.odometry
     rows = control_table(odo, ds.vehicle, cfg.sigma_speed, cfg.sigma_steer, cfg.steer_noise_gain)
     events = sorted([(float(t), 1, k) for k, t in enumerate(odo.t)]

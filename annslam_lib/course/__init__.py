@@ -2,22 +2,26 @@
 
 - ``release``: the student versions (nbgrader's format), their checks for leaks
 - ``workspace``: a student's own copy of the course, never overwritten
+- ``pacing``: how long each chapter takes a student, estimated from the notebooks
 - ``grader``: scores from the instructor's notebook, decided outside the student's code
 - ``plan``: the instructor's notebook read as the skeleton of a grade; a solution's names
+- ``similarity``: copied code found by comparing solutions' normalised syntax trees
 - ``integrity``: what the grader loads and watches (its bytecode, the course's files), inert
   reports
 - ``sandbox``: the kernel that runs student code (bubblewrap, no privilege, limits, time-outs)
+- ``cgroup``: a control group per sandbox, bounding its processes' memory and number together
 - ``confine``: the sandbox's launcher (limits, the drop of privilege, the system-call filter)
 - ``codec``: data, never code, between the grader and that kernel
-- ``kernel_side``: the grader's small helper inside the kernel
-- ``kernels``: Run All on a fresh kernel with a client that cannot stall silently
-- ``hub``: a class on JupyterHub: the class list, one Unix account per student, the hub folder
-- ``hub_config``: JupyterHub's settings for that class (``hub/jupyterhub_config.py``)
-- ``hub_setup``: the hub folder prepared (students' environment, release, data, proxy), the start
-- ``hub_class``: the instructor's steps through nbgrader's exchange (release, collect, grade,
-  feedback)
+- ``kernel_side``: runs inside the sandboxed kernel: the grader's calls of the student's
+  functions
+- ``kernels``: runs in the course's own tools: Run All of a notebook on a fresh kernel, with a
+  notebook client that cannot stall silently
+- ``warm``: the study cache filled for a class by one Run All of every notebook
+- ``hub``: a class on JupyterHub (a subpackage): the class list, one Unix account per
+  student, the hub folder, its set-up, JupyterHub's settings and the instructor's steps
 - ``cli``: ``python -m annslam_lib ...``
 """
 
-__all__ = ["release", "workspace", "grader", "plan", "integrity", "sandbox", "confine", "codec",
-           "kernel_side", "kernels", "hub", "hub_config", "hub_setup", "hub_class", "cli"]
+__all__ = ["release", "workspace", "pacing", "grader", "plan", "similarity", "integrity",
+           "sandbox", "cgroup", "confine", "codec", "kernel_side", "kernels", "warm", "hub",
+           "cli"]

@@ -383,14 +383,14 @@ def _add_running(sub) -> None:
 
 def _hub(args: argparse.Namespace) -> int:
     from .hub import HubError, HubLayout, check_name
-    from .hub_setup import prepare, start
+    from .hub.setup import prepare, start
 
     try:
         check_name(args.instructor)
         if args.image_files:
             from pathlib import Path
 
-            from .hub_setup import image_files
+            from .hub.setup import image_files
 
             image_files(HubLayout(Path(args.image_files).resolve()))
             return 0
@@ -431,7 +431,7 @@ def _add_hub(sub) -> None:
 def _class(args: argparse.Namespace) -> int:
     from .grader import GradingEnvironmentError
     from .hub import HubError, HubLayout, give_course
-    from .hub_class import ACTIONS
+    from .hub.classroom import ACTIONS
 
     try:
         layout = HubLayout.from_env()

@@ -77,7 +77,7 @@ def _torch():
     return torch
 
 
-def _module_spec(m) -> dict:
+def module_spec(m) -> dict:
     torch = _torch()
     if not isinstance(m, torch.nn.Sequential):
         raise CodecError(f"torch module {type(m).__name__} cannot be sent (only nn.Sequential)")
@@ -215,7 +215,7 @@ def encode(value, _modules: list | None = None):
                     "grad": value.requires_grad}
         if isinstance(value, torch.nn.Module):
             modules.append(value)
-            return _module_spec(value)
+            return module_spec(value)
         if isinstance(value, torch.optim.Optimizer):
             return _optimizer_spec(value, modules)
     text = repr(value)

@@ -225,6 +225,7 @@ def main(argv: list[str]) -> None:
     # parent is gone and quit. Its lifetime is bound by the sandbox (--die-with-parent).
     os.environ.pop("JPY_PARENT_PID", None)
     kernel = [sys.executable, "-m", "ipykernel_launcher", *argv[1:]]
+    # annslam_lib._settings.LIFELINE, read here: this script imports nothing of the package
     lifeline = int(os.environ.pop("ANNSLAM_LIFELINE", "-1"))
     if not cfg.get("reaper"):
         os.execv(sys.executable, kernel)

@@ -61,7 +61,7 @@ from ..grading.core import (GradingError, forbidden, forbidden_message, full_fee
                             grading_student)
 from . import codec
 from .integrity import Guard, course_folders, inert, prepare_grader
-from .plan import (CODE_STUB, GradePlan, PlannedCell, _defined_names, _meta, _read_notebook,
+from .plan import (CODE_STUB, GradePlan, PlannedCell, defined_names, cell_meta, read_graded_notebook,
                    free_names, plan, static_evasions, static_forbidden)
 from .sandbox import (NO_SANDBOX_WARNING, ExecResult, GradingEnvironmentError,
                       KernelStartError, Limits, Sandbox)
@@ -209,13 +209,13 @@ class RemoteFunction:
             if modules:
                 return
             payloads.append(p)
-        todo = [p for p in dict.fromkeys(payloads) if p not in self._batch]
+        key = json.dumps(list(forbidden()))      # a reply holds for these paths only
+        todo = [p for p in dict.fromkeys(payloads) if key + p not in self._batch]
         if not todo:
             return
         timeout = self._session.sandbox.limits.call_timeout * 4
         replies = self._round_trip("call_many", todo, timeout)
         if isinstance(replies, list) and len(replies) == len(todo):
-            key = json.dumps(list(forbidden()))
             self._batch.update({key + p: r for p, r in zip(todo, replies)})
 
     def __call__(self, *args):
@@ -539,8 +539,8 @@ def grade_submission(path, instructor, *, limits: Limits = Limits(), isolation: 
     student, assignment = student_of(path)
     g = SubmissionGrade(str(path), Path(instructor).name, student, assignment)
     try:
-        inst = _read_notebook(Path(instructor), "instructor notebook")
-        sub = _read_notebook(path, "submission")
+        inst = read_graded_notebook(Path(instructor), "instructor notebook")
+        sub = read_graded_notebook(path, "submission")
         gplan = plan(inst, sub)
     except ValueError as e:
         g.graded, g.reason = False, str(e)
@@ -549,8 +549,8 @@ def grade_submission(path, instructor, *, limits: Limits = Limits(), isolation: 
     solutions = {}
     for k, c in enumerate(gplan.cells):
         if c.role == "solution":
-            inst_cell = next(x for x in inst.cells if _meta(x).get("grade_id") == c.grade_id)
-            for name in _defined_names(inst_cell.source):
+            inst_cell = next(x for x in inst.cells if cell_meta(x).get("grade_id") == c.grade_id)
+            for name in defined_names(inst_cell.source):
                 solutions.setdefault(name, k)
     tests = [c for c in gplan.cells if c.role == "test"]
     g.max_score = sum(c.points for c in tests)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 
 from ..grading.core import watch_calls
-from .codec import MAX_BYTES, CodecError, _module_spec, decode, encode
+from .codec import MAX_BYTES, CodecError, module_spec, decode, encode
 
 __all__ = ["call", "call_many", "REPLY_BYTES"]
 
@@ -43,7 +43,7 @@ def call(name: str, payload: str, forbidden: str = "[]") -> str:
             error = e
     reply = {"hits": sorted(set(hits)), "states": []}
     try:
-        reply["states"] = [_module_spec(m)["state"] for m in modules]
+        reply["states"] = [module_spec(m)["state"] for m in modules]
         reply["value" if error is None else "error"] = encode(value if error is None else error)
         text = json.dumps(reply, allow_nan=False)
         if len(text) > REPLY_BYTES:

@@ -44,7 +44,7 @@ def _words(nb) -> int:
 
 def _ungraded(nb) -> list[str]:
     """Grade ids of the solution cells no test cell uses (an exercise without a check)."""
-    from .plan import _defined_names, free_names
+    from .plan import defined_names, free_names
 
     meta = [c.metadata.get("nbgrader", {}) for c in nb.cells]
     used = set()
@@ -52,7 +52,7 @@ def _ungraded(nb) -> list[str]:
         if m.get("grade") and not m.get("solution"):
             used |= free_names(c.source)
     return [m["grade_id"] for c, m in zip(nb.cells, meta)
-            if m.get("solution") and c.cell_type == "code" and not (_defined_names(c.source) & used)]
+            if m.get("solution") and c.cell_type == "code" and not (defined_names(c.source) & used)]
 
 
 def chapter_rows(paths) -> list[dict]:

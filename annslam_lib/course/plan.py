@@ -25,11 +25,11 @@ SKIP_TAG = "grading-skip"
 _BUILTINS = set(dir(builtins))
 
 
-def _meta(cell) -> dict:
+def cell_meta(cell) -> dict:
     return cell.get("metadata", {}).get("nbgrader", {}) or {}
 
 
-def _defined_names(source: str) -> set[str]:
+def defined_names(source: str) -> set[str]:
     """Top-level names a cell binds (def, class, assignment, import)."""
     try:
         tree = ast.parse(source)
@@ -275,7 +275,9 @@ class GradePlan:
     context: list[str]                    # the course cells' sources (imports, for reading)
 
 
-def _read_notebook(path: Path, what: str):
+def read_graded_notebook(path: Path, what: str):
+    """A notebook to grade read from ``path``: ValueError or TypeError naming ``what`` for
+    unreadable bytes, text that is not UTF-8 or not nbformat JSON, or no list of cells."""
     try:
         raw = path.read_bytes()
     except OSError as e:
@@ -299,22 +301,22 @@ def plan(instructor, submission) -> GradePlan:
     notes = []
     inst_solutions, inst_tests = {}, {}
     for c in instructor.cells:
-        m = _meta(c)
+        m = cell_meta(c)
         if m.get("solution") and c.cell_type == "code":
             inst_solutions[m["grade_id"]] = c
         elif m.get("grade") and not m.get("solution"):
             inst_tests[m["grade_id"]] = c
     known = set(inst_solutions) | set(inst_tests) | {
-        _meta(c).get("grade_id") for c in instructor.cells if _meta(c)}
+        cell_meta(c).get("grade_id") for c in instructor.cells if cell_meta(c)}
     sub_by_id, by_defined = {}, {}
     for i, c in enumerate(submission.cells):
-        m = _meta(c) if isinstance(c, dict) else {}
+        m = cell_meta(c) if isinstance(c, dict) else {}
         gid = m.get("grade_id") if isinstance(m, dict) else None
         src = c.get("source", "") if isinstance(c, dict) else ""
         if not isinstance(src, str):
             src = "".join(src) if isinstance(src, list) else ""
         if c.get("cell_type") == "code":
-            for name in _defined_names(src):
+            for name in defined_names(src):
                 by_defined.setdefault(name, (i, src))
         if not gid:
             continue
@@ -329,7 +331,7 @@ def plan(instructor, submission) -> GradePlan:
             elif src not in (inst_tests[gid].source, _visible(inst_tests[gid].source)):
                 notes.append(f"test cell {gid!r} was edited: the instructor's test cell is used")
             pts = m.get("points")
-            want = _meta(inst_tests[gid]).get("points")
+            want = cell_meta(inst_tests[gid]).get("points")
             if pts != want:
                 notes.append(f"points of {gid!r} changed to {pts!r}: the instructor's {want} count")
             continue
@@ -340,19 +342,19 @@ def plan(instructor, submission) -> GradePlan:
                 continue
             sub_by_id.setdefault(gid, src)
     for gid in inst_tests:
-        if not any(_meta(c).get("grade_id") == gid for c in submission.cells
+        if not any(cell_meta(c).get("grade_id") == gid for c in submission.cells
                    if isinstance(c, dict)):
             notes.append(f"test cell {gid!r} is missing from the submission: restored")
     cells = []
     for i, c in enumerate(instructor.cells):
         if c.cell_type != "code":
             continue
-        m = _meta(c)
+        m = cell_meta(c)
         gid = m.get("grade_id", "")
         if m.get("solution"):
             src = sub_by_id.get(gid)
             if src is None:
-                wanted = _defined_names(c.source) - {"np", "math"}
+                wanted = defined_names(c.source) - {"np", "math"}
                 match = next((by_defined[n] for n in sorted(wanted) if n in by_defined), None)
                 if match is not None:
                     notes.append(f"solution cell {gid!r} not found by its grade id: used cell "
@@ -374,16 +376,16 @@ def plan(instructor, submission) -> GradePlan:
 
 def _visible(source: str) -> str:
     """A test cell as the student version shows it (hidden tests removed)."""
-    from .release import _regions, _replace
+    from .release import marked_regions, replace_regions
 
-    return _replace(source, _regions(source, "BEGIN HIDDEN TESTS", "END HIDDEN TESTS", "cell"),
+    return replace_regions(source, marked_regions(source, "BEGIN HIDDEN TESTS", "END HIDDEN TESTS", "cell"),
                     None)
 
 
 def _stub_of(source: str) -> str:
     """The instructor's solution cell with its solution replaced by the stub (what an
     untouched student version holds)."""
-    from .release import _regions, _replace
+    from .release import marked_regions, replace_regions
 
-    return _replace(source, _regions(source, "BEGIN SOLUTION", "END SOLUTION", "cell"),
+    return replace_regions(source, marked_regions(source, "BEGIN SOLUTION", "END SOLUTION", "cell"),
                     CODE_STUB)

@@ -22,6 +22,8 @@ from pathlib import Path
 
 import nbformat
 
+from .plan import cell_meta
+
 __all__ = ["ReleaseError", "Exercise", "exercises", "validate", "student_version", "release",
            "leaks", "read_notebook", "exercise_table", "solution_lines", "hidden_test_lines",
            "CODE_STUB", "TEXT_STUB", "ANSWER_TAG", "ANSWER_STUB", "CELL_METADATA",
@@ -51,16 +53,12 @@ class ReleaseError(ValueError):
     """A notebook's exercise markup is broken (names the notebook and the cell)."""
 
 
-def _meta(cell) -> dict:
-    return cell.get("metadata", {}).get("nbgrader", {})
-
-
 def _is_solution(cell) -> bool:
-    return bool(_meta(cell).get("solution"))
+    return bool(cell_meta(cell).get("solution"))
 
 
 def _is_grade(cell) -> bool:
-    return bool(_meta(cell).get("grade"))
+    return bool(cell_meta(cell).get("grade"))
 
 
 @dataclass(frozen=True)
@@ -72,7 +70,7 @@ class Exercise:
     cell: int
 
 
-def _regions(source: str, begin: str, end: str, where: str) -> list[tuple[int, int]]:
+def marked_regions(source: str, begin: str, end: str, where: str) -> list[tuple[int, int]]:
     """(first, last) line indices of each begin..end region (markers included)."""
     out, start = [], None
     for i, line in enumerate(source.split("\n")):
@@ -110,9 +108,9 @@ def validate(nb, name: str = "notebook", *, instructor: bool = True) -> list[Exe
                 raise ReleaseError(f"{where}, line {n}: marker {m.group(0)!r} is not written "
                                    f"'{m.group(0).upper()}' (capitals, one space): nbgrader and "
                                    "this release would not see it and copy the answer")
-        sol = _regions(cell.source, BEGIN_SOLUTION, END_SOLUTION, where)
-        hid = _regions(cell.source, BEGIN_HIDDEN, END_HIDDEN, where)
-        meta = _meta(cell)
+        sol = marked_regions(cell.source, BEGIN_SOLUTION, END_SOLUTION, where)
+        hid = marked_regions(cell.source, BEGIN_HIDDEN, END_HIDDEN, where)
+        meta = cell_meta(cell)
         if sol and not _is_solution(cell):
             raise ReleaseError(f"{where}: a solution region in a cell not marked as a solution")
         if hid and not _is_grade(cell):
@@ -163,7 +161,7 @@ def exercise_table(paths) -> str:
     return "\n".join(rows)
 
 
-def _replace(source: str, regions, stub: str | None) -> str:
+def replace_regions(source: str, regions, stub: str | None) -> str:
     lines = source.split("\n")
     out, k = [], 0
     for first, last in regions:
@@ -189,15 +187,15 @@ def student_version(nb, name: str = "notebook"):
     for i, cell in enumerate(nb.cells):
         where = f"{name}, cell {i}"
         stub = CODE_STUB if cell.cell_type == "code" else TEXT_STUB
-        regions = _regions(cell.source, BEGIN_SOLUTION, END_SOLUTION, where)
+        regions = marked_regions(cell.source, BEGIN_SOLUTION, END_SOLUTION, where)
         if cell.cell_type == "markdown" and ANSWER_TAG in cell.metadata.get("tags", []):
             cell.source = ANSWER_STUB          # an ungraded exercise's written answer
             cell.pop("attachments", None)
         elif _is_solution(cell) and not regions:
             cell.source = stub                 # nbgrader: a solution cell without a region
         else:
-            cell.source = _replace(cell.source, regions, stub)
-        cell.source = _replace(cell.source, _regions(cell.source, BEGIN_HIDDEN, END_HIDDEN,
+            cell.source = replace_regions(cell.source, regions, stub)
+        cell.source = replace_regions(cell.source, marked_regions(cell.source, BEGIN_HIDDEN, END_HIDDEN,
                                                      where), None)
         for key in set(cell.metadata) - CELL_METADATA:
             del cell.metadata[key]             # a custom key may hold the answer
@@ -267,7 +265,7 @@ def _region_lines(nb, begin: str, end: str) -> set[str]:
     lines = set()
     for cell in nb.cells:
         src = cell.source.split("\n")
-        for first, last in _regions(cell.source, begin, end, "notebook"):
+        for first, last in marked_regions(cell.source, begin, end, "notebook"):
             lines |= {s.strip() for s in src[first + 1:last]}
     return {s for s in lines if s and not s.startswith("#")}
 
@@ -277,7 +275,7 @@ def _outside_lines(nb, begin: str, end: str) -> set[str]:
     for cell in nb.cells:
         src = cell.source.split("\n")
         inside = set()
-        for first, last in _regions(cell.source, begin, end, "notebook"):
+        for first, last in marked_regions(cell.source, begin, end, "notebook"):
             inside |= set(range(first, last + 1))
         lines |= {s.strip() for i, s in enumerate(src) if i not in inside}
     return lines

@@ -57,6 +57,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from .. import _settings
 from . import cgroup
 
 __all__ = ["Limits", "ExecResult", "Sandbox", "GradingEnvironmentError", "KernelStartError",
@@ -544,23 +545,24 @@ class Sandbox:
 
     def _env(self) -> dict:
         env = _base_env()
-        if "ANNSLAM_DATA_URL" in os.environ:
-            env["ANNSLAM_DATA_URL"] = os.environ["ANNSLAM_DATA_URL"]
+        mirror = _settings.data_url()
+        if mirror is not None:
+            env[_settings.DATA_URL] = mirror
         from ..data import fetch                  # the kernel reads the data where we do
         if self.user:
             env["JUPYTERHUB_USER"] = self.user
-        env.update(ANNSLAM_DATA=str(fetch.data_dir()), HOME=str(self.home),
-                   PYTHONPATH=str(self.lib), MPLCONFIGDIR=str(self.home / ".mpl"),
-                   IPYTHONDIR=str(self.home / ".ipython"),
+        # A grade is computed, never read from a pickle (the study cache off), nor run through
+        # machine code compiled and cached by another process: the numpy gating
+        # (slam.compiled), and numba's cache (if student code uses numba) in the sandbox's home.
+        env.update({_settings.DATA: str(fetch.data_dir()), _settings.CACHE: "off",
+                    _settings.KERNEL: "numpy"},
+                   HOME=str(self.home), PYTHONPATH=str(self.lib),
+                   MPLCONFIGDIR=str(self.home / ".mpl"), IPYTHONDIR=str(self.home / ".ipython"),
                    JUPYTER_RUNTIME_DIR=str(self.home / ".jupyter-runtime"),
                    PYTHONDONTWRITEBYTECODE="1", PYTHONNOUSERSITE="1", OMP_NUM_THREADS="1",
                    OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1", PYTHONHASHSEED="0",
                    MPLBACKEND="agg", USER="student", LOGNAME="student",
-                   ANNSLAM_CACHE="off",       # a grade is computed, never read from a pickle
-                   # nor run through machine code compiled and cached by another process:
-                   # the numpy gating (slam.compiled), numba's cache (if student code uses
-                   # numba) kept in the sandbox's own home
-                   ANNSLAM_KERNEL="numpy", NUMBA_CACHE_DIR=str(self.home / ".numba"))
+                   NUMBA_CACHE_DIR=str(self.home / ".numba"))
         return env
 
     def start(self) -> None:
@@ -588,7 +590,7 @@ class Sandbox:
         log = open(self.private / f"kernel-{self.kernels_started}.log", "wb")   # can reach it
         env = self._env()
         life_r, self._lifeline = os.pipe()       # the sandbox ends when this end is closed
-        env["ANNSLAM_LIFELINE"] = str(life_r)
+        env[_settings.LIFELINE] = str(life_r)
         try:
             km.start_kernel(cwd=str(self.work), env=env, stdout=log, stderr=log,
                             pass_fds=(life_r,))

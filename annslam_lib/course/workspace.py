@@ -23,22 +23,21 @@ from pathlib import Path
 
 import nbformat
 
+from .. import _settings
 from .release import hidden_test_lines, solution_lines, student_version, validate
 
 __all__ = ["ENV_WORK", "MANIFEST", "SyncReport", "work_dir", "sync", "running_servers"]
 
-ENV_WORK = "ANNSLAM_WORK"
+ENV_WORK = _settings.WORK
 MANIFEST = ".annslam-course.json"
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def work_dir() -> Path:
     """``$ANNSLAM_WORK`` if set (an empty value is an error), else ``work/<user>``."""
-    env = os.environ.get(ENV_WORK)
-    if env is not None:
-        if not env.strip():
-            raise ValueError(f"{ENV_WORK} is set but empty: unset it or name a folder")
-        return Path(env).expanduser().resolve()
+    folder = _settings.work_folder()          # set but blank: SetButEmpty, a ValueError
+    if folder is not None:
+        return folder
     user = re.sub(r"[^A-Za-z0-9_.-]", "_", getpass.getuser()) or "student"
     return ROOT / "work" / user
 

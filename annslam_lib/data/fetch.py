@@ -35,11 +35,12 @@ from pathlib import Path
 import platformdirs
 from tqdm.auto import tqdm
 
+from .. import _settings
 from . import registry
 from .registry import DataFile, DatasetEntry
 
-ENV_DIR = "ANNSLAM_DATA"
-ENV_URL = "ANNSLAM_DATA_URL"
+ENV_DIR = _settings.DATA
+ENV_URL = _settings.DATA_URL
 TIMEOUT_S = 60
 #: A file's download deadline: this many seconds plus its size at MIN_RATE_BPS.
 DEADLINE_BASE_S = 60.0
@@ -63,12 +64,13 @@ def data_dir() -> Path:
     """The data directory: ``$ANNSLAM_DATA``, else the per-user cache. ``ANNSLAM_DATA`` set
     but empty is an error (an unset variable would be the cache; an empty one is a mistake,
     e.g. ``ANNSLAM_DATA=$UNSET_VAR``)."""
-    env = os.environ.get(ENV_DIR)
-    if env is not None and not env.strip():
+    try:
+        folder = _settings.data_folder()
+    except _settings.SetButEmpty:
         raise DataError(f"${ENV_DIR} is set but empty. Unset it to use the user cache "
                         f"({Path(platformdirs.user_cache_dir('annslam')) / 'data'}), or set it "
-                        "to the folder that holds (or will hold) the course's data.")
-    return Path(env).expanduser() if env else Path(platformdirs.user_cache_dir("annslam")) / "data"
+                        "to the folder that holds (or will hold) the course's data.") from None
+    return folder if folder is not None else Path(platformdirs.user_cache_dir("annslam")) / "data"
 
 
 def dataset_dir(name: str) -> Path:
@@ -80,7 +82,7 @@ def url(name: str, filename: str) -> str:
     """Download URL of one file: the ``$ANNSLAM_DATA_URL`` mirror if set, else the registry URL."""
     entry = registry.get(name)
     f = entry.file(filename)
-    base = os.environ.get(ENV_URL)
+    base = _settings.data_url()
     return f"{base.rstrip('/')}/{entry.folder}/{f.name}" if base else f.url
 
 
@@ -118,7 +120,8 @@ def verify(name: str) -> Path:
 
 
 def _error(entry: DatasetEntry, f: DataFile, folder: Path, problem: str, got: str | None = None) -> DataError:
-    where = f"${ENV_DIR}" if os.environ.get(ENV_DIR) else f"the user cache; set ${ENV_DIR} to use another"
+    where = (f"${ENV_DIR}" if _settings.is_set(ENV_DIR)
+             else f"the user cache; set ${ENV_DIR} to use another")
     lines = [problem, f"  file:            {folder / f.name}", f"  expected sha256: {f.sha256}"]
     if got:
         lines.append(f"  got sha256:      {got}")

@@ -39,8 +39,31 @@ def gps_sigma_from_scatter(gps: Gps, *, span: float = 60.0, rate_tolerance: floa
     (module docstring): sqrt(mean over both axes of the squared second differences / 6),
     using only triples of fixes whose two steps are within ``rate_tolerance`` of the median
     step; at least ``floor`` m (the receiver's nominal accuracy: the car's own motion sets
-    a limit below which the estimate says nothing). Raises ValueError with fewer than 10
-    usable triples."""
+    a limit below which the estimate says nothing).
+
+    Parameters
+    ----------
+    gps : records.Gps
+        The fixes: times ``t`` (s) and positions ``xy`` (m).
+    span : float, optional
+        Length of the stretch used, s, from the first fix.
+    rate_tolerance : float, optional
+        Largest relative deviation of a step from the median step.
+    floor : float, optional
+        Smallest value returned, m.
+
+    Returns
+    -------
+    float
+        The noise standard deviation per axis, m.
+
+    Raises
+    ------
+    TypeError
+        If ``gps`` is not a records.Gps or a setting is not a number.
+    ValueError
+        With fewer than 3 fixes or 10 usable triples, or a setting out of range.
+    """
     _checks.instance("gps", gps, Gps, "records.Gps")
     span = _checks.real("span", span, lo=0.0, strict=True)
     _checks.real("rate_tolerance", rate_tolerance, lo=0.0, strict=True)
@@ -74,17 +97,37 @@ class LaserCalibration:
 
 def laser_calibration(dataset: Dataset) -> LaserCalibration:
     """Range bias and bearing offset of the beacons extracted from ``dataset``'s raw laser
-    (``perception.sources.detections_for(dataset, 'laser')``, as the filter extracts them), against its surveyed beacons seen from the GPS poses of the
-    scans (``perception.sources.gps_scan_poses``): the means of the matched residuals.
-    Chapter 04 measures them, chapter 05 uses them. Raises ValueError without a raw laser,
-    a surveyed map or GPS poses."""
+    (``perception.sources.detections_for(dataset, 'laser')``, as the filter extracts
+    them), against its surveyed beacons seen from the GPS poses of the scans (``slam.dead_reckoning.gps_scan_poses``): the means of the matched residuals.
+    Chapter 04 measures them, chapter 05 uses them.
+
+    Parameters
+    ----------
+    dataset : records.Dataset
+        A real run with its raw laser, surveyed beacons and GPS.
+
+    Returns
+    -------
+    LaserCalibration
+        ``range_bias`` (m) and ``bearing_offset`` (rad), their standard errors and the
+        number ``n`` of matched detections.
+
+    Raises
+    ------
+    TypeError
+        If ``dataset`` is not a records.Dataset.
+    ValueError
+        Without a raw laser, a surveyed map or GPS poses, or with fewer than 10 matched
+        detections.
+    """
     from ..perception import beacons, sources
+    from ..slam.dead_reckoning import gps_scan_poses
 
     if not isinstance(dataset, Dataset):
         raise TypeError(f"dataset must be a records.Dataset, got {type(dataset).__name__}")
     if dataset.laser is None or dataset.beacons is None:
         raise ValueError("laser_calibration needs a raw laser and a surveyed map")
-    poses, valid = sources.gps_scan_poses(dataset)
+    poses, valid = gps_scan_poses(dataset)
     det = sources.detections_for(dataset, "laser")          # the extractor the filter uses
     res = beacons.extraction_residuals(det, poses, valid, dataset.beacons)
     m = res.matched

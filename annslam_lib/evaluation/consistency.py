@@ -33,6 +33,25 @@ def chi2_band(dof, n=1, prob: float = 0.95) -> tuple[np.ndarray | float, np.ndar
     The NEES band of N Monte-Carlo runs (3 dof) is ``chi2_band(3, N)``; the band of a
     normalised NIS, total NIS / total dof D, is ``chi2_band(1, D)``. ``dof`` and ``n``
     may be arrays (broadcast); both must be positive. Notebook 05.
+
+    Parameters
+    ----------
+    dof : float or array_like
+        Degrees of freedom of each chi-square value, > 0.
+    n : int or array_like, optional
+        Number of values averaged, > 0, broadcast with ``dof``.
+    prob : float, optional
+        Probability of the two-sided band, in (0, 1).
+
+    Returns
+    -------
+    lo, hi : float or ndarray
+        The band's ends: floats for scalar inputs, else arrays of the broadcast shape.
+
+    Raises
+    ------
+    ValueError
+        If ``dof`` or ``n`` is not positive and finite, or ``prob`` is outside (0, 1).
     """
     p = _checks.probability("prob", prob)
     d, k = np.asarray(dof, dtype=float), np.asarray(n, dtype=float)
@@ -74,7 +93,7 @@ class Consistency:
 
 
 
-def _stack(name: str, runs) -> np.ndarray:
+def stack_runs(name: str, runs) -> np.ndarray:
     rows = [np.asarray(r, dtype=float) for r in runs]
     if not rows:
         raise ValueError(f"{name}: no runs given")
@@ -102,8 +121,32 @@ def _times(t, K: int) -> np.ndarray:
 def nees_consistency(nees_runs, t=None, *, dof: int = 3, prob: float = 0.95) -> Consistency:
     """Average NEES over runs at each time (``nees_runs``: one (K,) array per run, the
     same K scans in each, e.g. ``evaluation.consistency.pose_nees``), against the band of the average
-    of N chi2(dof) values (:func:`chi2_band`). ``mean`` is the time average (ANEES)."""
-    X = _stack("nees_runs", nees_runs)
+    of N chi2(dof) values (:func:`chi2_band`). ``mean`` is the time average (ANEES).
+
+    Parameters
+    ----------
+    nees_runs : sequence of array_like, each shape (K,)
+        The NEES of each of N runs, scan by scan.
+    t : array_like, shape (K,), optional
+        Time of each scan, s (default 0, 1, ..., K - 1).
+    dof : int, optional
+        Degrees of freedom of one NEES (3 for a pose).
+    prob : float, optional
+        Probability of the two-sided band, in (0, 1).
+
+    Returns
+    -------
+    Consistency
+        The average NEES at each scan with its band, the time average and the share of
+        scans inside the band.
+
+    Raises
+    ------
+    ValueError
+        For no runs, runs of different lengths, non-finite values or a ``t`` of the
+        wrong shape.
+    """
+    X = stack_runs("nees_runs", nees_runs)
     n, K = X.shape
     value = X.mean(axis=0)
     lo, hi = chi2_band(dof, n, prob)
@@ -117,7 +160,27 @@ def nees_consistency(nees_runs, t=None, *, dof: int = 3, prob: float = 0.95) -> 
 
 def scan_nis(result, n_scans: int) -> tuple[np.ndarray, np.ndarray]:
     """The laser-update NIS and its dof of every scan 0..n_scans-1 of an
-    ``slam.results.SlamResult`` (0 and 0 where a scan had no update; GPS updates left out)."""
+    ``slam.results.SlamResult`` (0 and 0 where a scan had no update; GPS updates left out).
+
+    Parameters
+    ----------
+    result : slam.results.SlamResult
+        A run's result.
+    n_scans : int
+        Number of scans of the run.
+
+    Returns
+    -------
+    nis : ndarray, shape (n_scans,)
+        The NIS of each scan's laser update.
+    dof : ndarray, shape (n_scans,)
+        Its degrees of freedom (2 per associated observation).
+
+    Raises
+    ------
+    ValueError
+        If the result holds a scan index outside 0..n_scans-1.
+    """
     nis = result.nis
     k = nis["kind"] == 0
     scans = nis["scan"][k]
@@ -134,8 +197,31 @@ def nis_consistency(nis_runs, dof_runs, t=None, *, prob: float = 0.95) -> Consis
     """Normalised NIS at each scan: sum over runs of NIS / sum of dof, with the band
     ``chi2_band(1, D)`` for the D dof of that scan (one (K,) array per run each, as from
     :func:`scan_nis`). Scans without any update in any run are dropped. ``mean`` is
-    the total NIS over the total dof."""
-    S, D = _stack("nis_runs", nis_runs), _stack("dof_runs", dof_runs)
+    the total NIS over the total dof.
+
+    Parameters
+    ----------
+    nis_runs : sequence of array_like, each shape (K,)
+        The NIS of each of N runs, scan by scan.
+    dof_runs : sequence of array_like, each shape (K,)
+        The matching degrees of freedom.
+    t : array_like, shape (K,), optional
+        Time of each scan, s (default 0, 1, ..., K - 1).
+    prob : float, optional
+        Probability of the two-sided band, in (0, 1).
+
+    Returns
+    -------
+    Consistency
+        NIS / dof at each scan with an update, with its band.
+
+    Raises
+    ------
+    ValueError
+        For no runs, runs of different lengths or shapes, non-finite values, no scan
+        with an update, or a ``t`` of the wrong shape.
+    """
+    S, D = stack_runs("nis_runs", nis_runs), stack_runs("dof_runs", dof_runs)
     if S.shape != D.shape:
         raise ValueError(f"nis_runs {S.shape} and dof_runs {D.shape} differ in shape")
     s, d = S.sum(axis=0), D.sum(axis=0)
@@ -155,8 +241,23 @@ def nis_consistency(nis_runs, dof_runs, t=None, *, prob: float = 0.95) -> Consis
 
 def correlation_matrix(P) -> np.ndarray:
     """Correlation coefficients C_ij = P_ij / sqrt(P_ii P_jj) of a covariance (n, n).
-    Raises ValueError for a non-square, non-finite or non-symmetric P, or a diagonal
-    entry <= 0 (a variable without uncertainty has no correlation)."""
+
+    Parameters
+    ----------
+    P : array_like, shape (n, n)
+        A covariance matrix.
+
+    Returns
+    -------
+    ndarray, shape (n, n)
+        The correlation matrix, symmetric, ones on the diagonal, entries in [-1, 1].
+
+    Raises
+    ------
+    ValueError
+        For a non-square, non-finite or non-symmetric P, or a diagonal entry <= 0 (a
+        variable without uncertainty has no correlation).
+    """
     P = np.asarray(P, dtype=float)
     if P.ndim != 2 or P.shape[0] != P.shape[1]:
         raise ValueError(f"P must be a square matrix, got shape {P.shape}")
@@ -176,7 +277,25 @@ def correlation_matrix(P) -> np.ndarray:
 def pose_nees(result, dataset: Dataset) -> np.ndarray:
     """Normalised estimation error squared of the pose at every trajectory row (3 dof),
     e^T P^-1 e with e = estimate - truth (heading wrapped), against the simulator's true
-    laser poses at the scan times (``dataset.info['scan_poses']``). Notebook 05."""
+    laser poses at the scan times (``dataset.info['scan_poses']``). Notebook 05.
+
+    Parameters
+    ----------
+    result : slam.results.SlamResult
+        A run on ``dataset``.
+    dataset : records.Dataset
+        A simulated dataset (with its truth).
+
+    Returns
+    -------
+    ndarray, shape (K,)
+        The NEES at each of the K rows of ``result.trajectory``.
+
+    Raises
+    ------
+    ValueError
+        If the dataset is not simulated (no ``info['scan_poses']``).
+    """
     if dataset.truth is None or "scan_poses" not in dataset.info:
         raise ValueError("pose_nees needs a simulated dataset (with info['scan_poses'])")
     truth = np.asarray(dataset.info["scan_poses"])[result.scan_index]
@@ -232,7 +351,7 @@ def run_ratios(nees_runs, dof: int = 3) -> np.ndarray:
     """Each run's time-averaged NEES per degree of freedom (N,), from the pose NEES of N
     runs scan by scan (N, K) (``MonteCarlo.nees_runs``): 1 for a consistent filter.
     Chapters 04a and 05."""
-    a = _stack("nees", nees_runs)
+    a = stack_runs("nees", nees_runs)
     _checks.integer("dof", dof, lo=1)
     return a.mean(axis=1) / dof
 
@@ -326,6 +445,12 @@ def ratio_effect(values, name: str = "NEES / dof", *, margin: float = MARGIN,
     Returns
     -------
     Effect
+
+    Raises
+    ------
+    ValueError
+        For fewer than 3 values, a non-finite or negative value, ``margin`` <= 0 or
+        ``prob`` outside (0, 1).
     """
     v = _values("values", values)
     if np.any(v < 0):
@@ -338,7 +463,32 @@ def paired_effect(a, b, name: str = "difference", *, margin: float = MARGIN,
     """Two filters on the same runs: the per-run difference ``a - b`` as an :class:`Effect`
     around 0 ('higher', 'lower' or 'no detectable difference'; the power is against a
     difference of ``margin``). Pairing removes the scene-to-scene variation both share, so
-    it resolves far smaller differences than two separate intervals (chapter 04a)."""
+    it resolves far smaller differences than two separate intervals (chapter 04a).
+
+    Parameters
+    ----------
+    a : array_like, shape (N,)
+        One value per run of the first filter, N >= 3, finite.
+    b : array_like, shape (N,)
+        The second filter's values on the same runs.
+    name : str, optional
+        The label of the summary line.
+    margin : float, optional
+        The practical margin, > 0 (default :data:`MARGIN`).
+    prob : float, optional
+        The interval's probability, in (0, 1).
+
+    Returns
+    -------
+    Effect
+        The mean difference with its t-interval, its word and the power of the rule.
+
+    Raises
+    ------
+    ValueError
+        For fewer than 3 values, a non-finite value, ``a`` and ``b`` of different
+        lengths, ``margin`` <= 0 or ``prob`` outside (0, 1).
+    """
     va, vb = _values("a", a), _values("b", b)
     if va.shape != vb.shape:
         raise ValueError(f"a and b must hold the same runs, got {va.size} and {vb.size} values")
@@ -367,7 +517,28 @@ class MapConsistency:
 def map_consistency(values, dofs, *, prob: float = 0.95) -> MapConsistency:
     """The map NEES of independent runs together (``values``, ``dofs``: one
     :func:`map_nees` pair per run): their sum is chi2(sum of dof) for a consistent filter,
-    so the total per dof is judged against ``chi2_band(1, total dof)``."""
+    so the total per dof is judged against ``chi2_band(1, total dof)``.
+
+    Parameters
+    ----------
+    values : array_like, shape (N,)
+        The map NEES of each run, >= 0.
+    dofs : array_like, shape (N,)
+        Its degrees of freedom (2 per landmark), > 0.
+    prob : float, optional
+        Probability of the two-sided band, in (0, 1).
+
+    Returns
+    -------
+    MapConsistency
+        The total NEES per dof with its band, whether it is inside, and each run's
+        NEES per dof.
+
+    Raises
+    ------
+    ValueError
+        For empty or unequal inputs, a negative or non-finite NEES or a dof <= 0.
+    """
     v, d = np.asarray(values, dtype=float).ravel(), np.asarray(dofs, dtype=float).ravel()
     if v.size == 0 or v.shape != d.shape:
         raise ValueError(f"values and dofs must be non-empty and of one length, got {v.size} "
@@ -417,7 +588,37 @@ def monte_carlo(seeds, motion_model: str = "euler", route: str = "loop", laps: i
     measured on 30 runs at 2 deg, map NEES per dof 2.2 (standard filter) and 3.6 (FEJ), 0.96
     and 0.93 once each map is rigidly aligned to the truth and the three global directions
     are left out; read the pose NEES there, or the aligned map.
-    Computed once per machine (``annslam_lib._cache``)."""
+    Computed once per machine (``annslam_lib._cache``).
+
+    Parameters
+    ----------
+    seeds : iterable of int
+        The simulator's seeds, one run each.
+    motion_model : {'euler', 'midpoint'}, optional
+        The filter's motion model (``SlamConfig.motion_model``).
+    route : {'loop', 'figure8', 'hairpin'}, optional
+        The simulator's route (``data.simulate.ROUTES``).
+    laps : int, optional
+        Laps of the route per run.
+    draw_initial : bool, optional
+        Start each run at the true pose plus a draw from the prior.
+    **config
+        Other :class:`SlamConfig` fields.
+
+    Returns
+    -------
+    MonteCarlo
+        The per-scan NEES and NIS judgements, landmarks mapped per run, the map
+        judgement (None with a known map), every run's pose NEES (N, K) and rejected
+        detections (N, K).
+
+    Raises
+    ------
+    ValueError
+        For no seed or an unknown configuration field.
+    RuntimeError
+        If a simulated run skipped a scan.
+    """
     from ..data import simulate
     from ..slam.config import SlamConfig
     from ..slam.results import STATUS
@@ -452,4 +653,4 @@ def monte_carlo(seeds, motion_model: str = "euler", route: str = "loop", laps: i
             maps.append(map_nees(r, ds))
     return MonteCarlo(nees=nees_consistency(nees, t_scan), nis=nis_consistency(nis, dof, t_scan),
                       mapped=tuple(mapped), map=map_consistency(*zip(*maps)) if maps else None,
-                      nees_runs=_stack("nees", nees), rejected_runs=np.array(rejected))
+                      nees_runs=stack_runs("nees", nees), rejected_runs=np.array(rejected))

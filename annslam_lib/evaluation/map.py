@@ -34,8 +34,28 @@ __all__ = ["point_rmse", "rigid_align", "match_landmarks", "MapErrors", "map_err
 
 def rigid_align(a, b) -> tuple[np.ndarray, np.ndarray]:
     """Rotation R (2, 2) and translation t (2,) minimising sum |R a_i + t - b_i|^2
-    (Kabsch, no scale, reflections excluded). a, b (K, 2) paired points, K >= 2 and
-    not all coincident. Raises ValueError otherwise."""
+    (Kabsch, no scale, reflections excluded).
+
+    Parameters
+    ----------
+    a : array_like, shape (K, 2)
+        The points to move, K >= 2 and not all coincident.
+    b : array_like, shape (K, 2)
+        Their partners, paired row by row.
+
+    Returns
+    -------
+    R : ndarray, shape (2, 2)
+        The rotation.
+    t : ndarray, shape (2,)
+        The translation, in the units of the points.
+
+    Raises
+    ------
+    ValueError
+        For shapes that differ, fewer than 2 pairs, points that all coincide, or
+        non-finite values.
+    """
     a, b = _checks.points("a", a), _checks.points("b", b)
     if a.shape != b.shape:
         raise ValueError(f"a and b must have the same shape, got {a.shape} and {b.shape}")
@@ -188,8 +208,29 @@ def map_errors(mapped, true, *, max_distance: float = 1.0) -> MapErrors:
     """Match ``mapped`` (M, 2) to ``true`` (T, 2) landmarks inside an alignment loop (module
     docstring: align first, so the result does not depend on the map's frame) and measure
     the errors of the matched pairs absolute and after the best rigid alignment. A pair is
-    a match when it lies within ``max_distance`` metres in the aligned frame. Raises
-    ValueError when fewer than 2 landmarks can be matched in any frame."""
+    a match when it lies within ``max_distance`` metres in the aligned frame.
+
+    Parameters
+    ----------
+    mapped : array_like, shape (M, 2)
+        The estimated landmarks, m.
+    true : array_like, shape (T, 2)
+        The surveyed (or true) landmarks, m.
+    max_distance : float, optional
+        Largest distance of a match in the aligned frame, m, > 0.
+
+    Returns
+    -------
+    MapErrors
+        The matched pairs, their errors absolute and aligned (RMSE, max), the
+        alignment, and the missed, spurious and duplicate landmarks.
+
+    Raises
+    ------
+    ValueError
+        When fewer than 2 landmarks can be matched in any frame, or for bad points or
+        a bad ``max_distance``.
+    """
     mapped, true = _checks.points("mapped", mapped), _checks.points("true", true)
     max_distance = _checks.real("max_distance", max_distance, lo=0.0, strict=True)
     found = _align_and_match(mapped, true, max_distance)
@@ -218,7 +259,25 @@ def map_errors(mapped, true, *, max_distance: float = 1.0) -> MapErrors:
 def point_rmse(a, b=None) -> float:
     """Root mean square of the Euclidean lengths of the rows of ``a - b`` (or of ``a``)
     (K, 2), in the units of the points: the RMSE of K position estimates against their
-    truths (notebook 07). Raises ValueError for no rows, a wrong shape or a non-finite value."""
+    truths (notebook 07).
+
+    Parameters
+    ----------
+    a : array_like, shape (K, 2)
+        Points (e.g. estimates).
+    b : array_like, shape (K, 2), optional
+        Their partners (e.g. truths); None: the lengths of the rows of ``a``.
+
+    Returns
+    -------
+    float
+        sqrt(mean over the rows of |a_k - b_k|^2).
+
+    Raises
+    ------
+    ValueError
+        For no rows, a wrong shape or a non-finite value.
+    """
     a = np.asarray(a, dtype=float)
     pairs = [("a", a)] if b is None else [("a", a), ("b", np.asarray(b, dtype=float))]
     for name, v in pairs:

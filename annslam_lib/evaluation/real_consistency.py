@@ -33,7 +33,32 @@ def survey_nees(result, surveyed, mapped_index, surveyed_index, *,
     surveyed points ``surveyed[surveyed_index]`` (pairs, e.g. ``map_errors``' i_mapped and
     j_true), with the joint covariance of those landmarks from ``result.covariance`` plus
     ``sigma_survey``^2 per axis (independent survey errors), judged against chi-square with
-    2 K dof (``consistency.map_consistency``). Notebook 05."""
+    2 K dof (``consistency.map_consistency``). Notebook 05.
+
+    Parameters
+    ----------
+    result : slam.results.SlamResult
+        A run, with its final ``landmarks`` (M, 2) and ``covariance``.
+    surveyed : array_like, shape (T, 2)
+        The surveyed points, m.
+    mapped_index : array_like of int, shape (K,)
+        The mapped landmarks of the pairs.
+    surveyed_index : array_like of int, shape (K,)
+        Their surveyed partners.
+    sigma_survey : float, optional
+        Standard deviation of the survey per axis, m.
+
+    Returns
+    -------
+    MapConsistency
+        The joint NEES per dof (2 K dof) with its band.
+
+    Raises
+    ------
+    ValueError
+        For no pairs, unequal index arrays, an index out of range or used twice, or a
+        covariance that does not match the map.
+    """
     surveyed = _checks.points("surveyed", surveyed)
     i = np.asarray(mapped_index, dtype=np.int64).ravel()
     j = np.asarray(surveyed_index, dtype=np.int64).ravel()
@@ -100,7 +125,30 @@ def innovation_split(dataset, config=None, *, turning_steer: float = 0.05) -> In
     every laser and GPS update, each observation's innovation and the diagonals of
     H P H^T and R, before the update; ``turning`` where the odometry's |steering| exceeds
     ``turning_steer`` rad. The run itself is unchanged. Notebooks 05 and 06; computed once per
-machine (``annslam_lib._cache``)."""
+    machine (``annslam_lib._cache``).
+
+    Parameters
+    ----------
+    dataset : records.Dataset
+        The run's data.
+    config : SlamConfig, optional
+        As ``slam.runner.run``.
+    turning_steer : float, optional
+        |steering| above which the car counts as turning, rad.
+
+    Returns
+    -------
+    InnovationSplit
+        Per observation (m of them): sensor, time, turning, innovation (m, 2) and the
+        diagonals of H P H^T and R (m, 2), and its NIS.
+
+    Raises
+    ------
+    TypeError
+        If ``dataset`` is not a records.Dataset.
+    ValueError
+        As ``slam.runner.run``, or for a negative ``turning_steer``.
+    """
     from ..data.records import Dataset
     from ..slam.runner import run
 

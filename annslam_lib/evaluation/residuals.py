@@ -34,7 +34,23 @@ def bound_text(bound: float) -> str:
 def residual(x: float, bound: float = ROUNDING, unit: str = "") -> str:
     """'below 1e-12' (then ``unit``) when ``|x|`` is below ``bound``; otherwise the value to
     two significant digits, marked, so that a broken comparison shows in the output instead
-    of hiding behind the phrase. NaN says so."""
+    of hiding behind the phrase. NaN says so.
+
+    Parameters
+    ----------
+    x : float
+        The residual.
+    bound : float, optional
+        The resolution of the comparison (:data:`ROUNDING`, :data:`DIFFERENCES`).
+    unit : str, optional
+        Unit written after the phrase.
+
+    Returns
+    -------
+    str
+        'below <bound>', or the value marked '(NOT below <bound>)', or 'NaN (not
+        computed)'.
+    """
     x = float(x)
     u = f" {unit}" if unit else ""
     if math.isnan(x):
@@ -46,7 +62,22 @@ def residual(x: float, bound: float = ROUNDING, unit: str = "") -> str:
 
 def residuals(values, bound: float = ROUNDING, unit: str = "") -> str:
     """One phrase for several residuals: '(all) below 1e-12' when every one is, else each
-    value by :func:`residual`, comma-separated."""
+    value by :func:`residual`, comma-separated.
+
+    Parameters
+    ----------
+    values : iterable of float
+        The residuals.
+    bound : float, optional
+        The resolution of the comparison.
+    unit : str, optional
+        Unit written after the phrase.
+
+    Returns
+    -------
+    str
+        One phrase.
+    """
     vals = [float(v) for v in values]
     if vals and all(abs(v) < bound for v in vals):
         return (f"{'all ' if len(vals) > 1 else ''}below {bound_text(bound)}"

@@ -35,7 +35,7 @@ from scipy.stats import t as student_t
 
 from .. import _checks
 from .._cache import memoize as _memoize
-from .consistency import _stack, chi2_band
+from .consistency import stack_runs, chi2_band
 
 __all__ = ["scan_autocorrelation", "correlated_paths", "NullTest", "Verdict", "null_test"]
 
@@ -43,7 +43,7 @@ __all__ = ["scan_autocorrelation", "correlated_paths", "NullTest", "Verdict", "n
 def scan_autocorrelation(nees_runs, max_lag: int) -> np.ndarray:
     """Autocorrelation r[0..max_lag] (r[0] = 1) of the runs' per-scan NEES around its
     per-scan mean, pooled over runs. ``nees_runs``: one (K,) array per run, K > max_lag."""
-    X = _stack("nees_runs", nees_runs)
+    X = stack_runs("nees_runs", nees_runs)
     K = X.shape[1]
     max_lag = _checks.integer("max_lag", max_lag, lo=0)
     if max_lag >= K:
@@ -130,7 +130,7 @@ class NullTest:
     def judge(self, nees_runs, scale: float = 1.0) -> Verdict:
         """Judge runs of the same shape; ``scale`` multiplies every NEES (a filter that
         reported P / scale)."""
-        X = _stack("nees_runs", nees_runs) * float(scale)
+        X = stack_runs("nees_runs", nees_runs) * float(scale)
         if X.shape != (self.runs, self.scans):
             raise ValueError(f"nees_runs must be {self.runs} runs of {self.scans} scans, got {X.shape}")
         avg = X.mean(axis=0)
@@ -153,8 +153,38 @@ def null_test(nees_runs, *, dof: int = 3, prob: float = 0.95, level: float = 0.0
     """Simulate the null distribution of the share of scans inside the per-scan ``prob``
     band and of the ANEES, for runs shaped and correlated like ``nees_runs`` (one (K,)
     array per run), ``n_sim`` times from ``seed``; the measured autocorrelation is used up
-    to ``max_lag`` (default K // 4). Notebook 05. Computed once per machine."""
-    X = _stack("nees_runs", nees_runs)
+    to ``max_lag`` (default K // 4). Notebook 05. Computed once per machine.
+
+    Parameters
+    ----------
+    nees_runs : sequence of array_like, each shape (K,)
+        The per-scan NEES of N >= 3 runs.
+    dof : int, optional
+        Degrees of freedom of one NEES.
+    prob : float, optional
+        Probability of the per-scan band.
+    level : float, optional
+        Level of the test, in (0, 1).
+    n_sim : int, optional
+        Number of simulated sets of runs, >= 20.
+    seed : int, optional
+        Seed of the simulation.
+    max_lag : int, optional
+        Longest lag of the autocorrelation used, < K.
+
+    Returns
+    -------
+    NullTest
+        The per-scan band, the share threshold, the ANEES band, the simulated null
+        samples and the measured and simulated autocorrelations.
+
+    Raises
+    ------
+    ValueError
+        For fewer than 3 runs, runs of different lengths, runs that do not vary, or a
+        setting out of range.
+    """
+    X = stack_runs("nees_runs", nees_runs)
     runs, K = X.shape
     dof = _checks.integer("dof", dof, lo=1)
     level = _checks.probability("level", level)

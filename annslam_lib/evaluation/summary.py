@@ -136,7 +136,7 @@ def _heldout_aligned(m: MapErrors | None, held_out) -> float:
     return float(np.sqrt(np.mean(m.error_aligned[sel] ** 2))) if sel.any() else math.nan
 
 
-def _traj_rmse(traj, gps) -> tuple[float, float]:
+def trajectory_rmse(traj, gps) -> tuple[float, float]:
     """(absolute, SE(2)-aligned) RMSE against the fixes in the span; NaN without any."""
     if traj.shape[0] == 0:
         return math.nan, math.nan
@@ -149,7 +149,31 @@ def _traj_rmse(traj, gps) -> tuple[float, float]:
 
 def run_metrics(result, dataset: Dataset, *, t_heldout: float | None = None,
                 held_out_beacons=None, max_distance: float = 1.0) -> RunMetrics:
-    """The :class:`RunMetrics` of one filter run on ``dataset`` (module docstring)."""
+    """The :class:`RunMetrics` of one filter run on ``dataset`` (module docstring).
+
+    Parameters
+    ----------
+    result : slam.results.SlamResult
+        The run.
+    dataset : records.Dataset
+        The data it ran on (its GPS and, if any, its surveyed beacons).
+    t_heldout : float, optional
+        Start of the held-out time, s; None: no held-out time.
+    held_out_beacons : array_like of int, optional
+        Indices of held-out surveyed beacons; None: none.
+    max_distance : float, optional
+        Largest distance of a landmark match, m.
+
+    Returns
+    -------
+    RunMetrics
+        The run's numbers; NaN (counts: -1) where not measurable.
+
+    Raises
+    ------
+    TypeError
+        If ``dataset`` is not a records.Dataset.
+    """
     _checks.instance("dataset", dataset, Dataset, "records.Dataset")
     t, tr = pose_trace(result)
     odo = result.odometry_trajectory
@@ -157,9 +181,9 @@ def run_metrics(result, dataset: Dataset, *, t_heldout: float | None = None,
     if t_heldout is not None:
         late = t >= t_heldout
         held = dict(pose_trace_heldout=float(tr[late].mean()) if late.any() else math.nan,
-                    traj_rmse_heldout=_traj_rmse(odo[odo[:, 0] >= t_heldout], dataset.gps)[0])
+                    traj_rmse_heldout=trajectory_rmse(odo[odo[:, 0] >= t_heldout], dataset.gps)[0])
     c = result.counts
-    whole = _traj_rmse(odo, dataset.gps)
+    whole = trajectory_rmse(odo, dataset.gps)
     out = dict(scans=int(c["scans"]), landmarks=int(result.landmarks.shape[0]),
                rejected=int(c["rejected"]), traj_rmse=whole[0], traj_rmse_aligned=whole[1],
                traj_rmse_heldout=held.get("traj_rmse_heldout", math.nan),

@@ -41,7 +41,31 @@ def random_filter(cls, n_landmarks: int, *, seed: int = 0, vehicle: Vehicle = AC
     """A filter of class ``cls`` (``EkfSlam``, ``DenseEkfSlam`` or a subclass) holding ``n_landmarks``
     landmarks: pose (0, 0, 0.3) with a small covariance, then one augmentation with
     ranges 3..40 m and bearings 0.05..3.1 rad drawn from ``seed`` (the same seed gives the
-    same state for both classes)."""
+    same state for both classes).
+
+    Parameters
+    ----------
+    cls : type
+        ``EkfSlam``, ``DenseEkfSlam`` or a subclass.
+    n_landmarks : int
+        Landmarks in the state, >= 1.
+    seed : int, optional
+        Seed of the drawn measurements.
+    vehicle : Vehicle, optional
+        The car of the filter.
+
+    Returns
+    -------
+    EkfSlam or DenseEkfSlam
+        The filter, an instance of ``cls``, with state size 3 + 2 n_landmarks.
+
+    Raises
+    ------
+    TypeError
+        If ``cls`` is not one of the filter classes, or ``n_landmarks`` not an integer.
+    ValueError
+        If ``n_landmarks`` < 1.
+    """
     if not (isinstance(cls, type) and issubclass(cls, (EkfSlam, DenseEkfSlam))):
         raise TypeError(f"cls must be slam.efficient.EkfSlam or slam.dense.DenseEkfSlam (or a "
                          f"subclass), got {cls!r}")
@@ -55,7 +79,25 @@ def random_filter(cls, n_landmarks: int, *, seed: int = 0, vehicle: Vehicle = AC
 
 def step_controls(n: int = 200, vehicle: Vehicle = ACFR_UTE) -> list:
     """``n`` control rows (``models.motion.control_table``) of a car at 2 m/s with a slowly
-    swinging steering angle, odometry every 25 ms, ACFR process noise."""
+    swinging steering angle, odometry every 25 ms, ACFR process noise.
+
+    Parameters
+    ----------
+    n : int, optional
+        Number of rows, >= 2.
+    vehicle : Vehicle, optional
+        The car.
+
+    Returns
+    -------
+    list of tuple
+        ``n`` rows of ``models.motion.control_table``.
+
+    Raises
+    ------
+    TypeError, ValueError
+        If ``n`` is not an integer >= 2.
+    """
     n = _checks.integer("n", n, lo=2)
     k = np.arange(n)
     odo = Odometry(t=k * DT, speed=np.full(n, 2.0), steering=0.2 * np.sin(k / 20))
@@ -82,7 +124,29 @@ def time_steps(f, steps: int, controls: list, *, seed: int = 0) -> StepTimes:
     Step k: predict with ``controls[k % len(controls)]`` over 25 ms and flush; then one
     update with a measurement of landmark j (drawn from ``seed``) made from the filter's
     own prediction plus noise of (SIGMA_RANGE, SIGMA_BEARING). Only the predict/flush and
-    the update are inside the timers (not the making of the measurement)."""
+    the update are inside the timers (not the making of the measurement).
+
+    Parameters
+    ----------
+    f : EkfSlam or DenseEkfSlam
+        A filter holding at least one landmark (:func:`random_filter`).
+    steps : int
+        Number of steps, >= 1.
+    controls : list of tuple
+        Control rows (:func:`step_controls`), used in turn.
+    seed : int, optional
+        Seed of the landmarks observed and the measurement noise.
+
+    Returns
+    -------
+    StepTimes
+        Mean wall-clock seconds per step of the prediction and of the update.
+
+    Raises
+    ------
+    ValueError
+        For no control rows, a filter without landmarks, or ``steps`` < 1.
+    """
     steps = _checks.integer("steps", steps, lo=1)
     if not controls:
         raise ValueError("controls must hold at least one control row (models.motion.control_table)")
@@ -137,7 +201,31 @@ def step_costs(sizes=(50, 150, 300), *, dense_sizes=None, efficient_steps: int =
     at the sizes in ``dense_sizes`` (default: all) and for max(3, dense_budget (50/N)^2)
     steps, since its cost grows about as N^3 (60 steps at N = 50, 3 at N = 300). Each
     filter first runs a few untimed warm-up steps. BLAS runs on one thread, as in
-    ``slam.runner.run``. Returns one :class:`StepCost` per size, in the order given."""
+    ``slam.runner.run``.
+
+    Parameters
+    ----------
+    sizes : sequence of int, optional
+        Map sizes N (landmarks), each >= 1.
+    dense_sizes : sequence of int, optional
+        The sizes at which the dense filter is timed too (default: all).
+    efficient_steps : int, optional
+        Timed steps of the efficient filter per size.
+    dense_budget : float, optional
+        Timed steps of the dense filter at N = 50, scaled by (50/N)^2 at other sizes.
+    seed : int, optional
+        Seed of the states and measurements.
+
+    Returns
+    -------
+    list of StepCost
+        One per size, in the order given.
+
+    Raises
+    ------
+    ValueError
+        For no sizes or a setting out of range.
+    """
     sizes = [_checks.integer("sizes entry", N, lo=1) for N in sizes]
     if not sizes:
         raise ValueError("sizes must name at least one map size")
@@ -168,7 +256,25 @@ def _step_cost(N, with_dense, controls, efficient_steps, dense_budget, seed) -> 
 
 def loglog_slope(x, y) -> float:
     """Least-squares slope of log(y) against log(x): the exponent p of y ~ c x^p.
-    x, y: positive finite 1-D arrays of the same length >= 2 (x not all equal)."""
+
+    Parameters
+    ----------
+    x : array_like, shape (K,)
+        Positive finite values, K >= 2, not all equal.
+    y : array_like, shape (K,)
+        Positive finite values.
+
+    Returns
+    -------
+    float
+        The exponent p.
+
+    Raises
+    ------
+    ValueError
+        For shapes that differ, fewer than 2 values, values that are not positive and
+        finite, or x all equal.
+    """
     x = np.asarray(x, dtype=float)
     y = np.asarray(y, dtype=float)
     if x.ndim != 1 or x.shape != y.shape or x.size < 2:

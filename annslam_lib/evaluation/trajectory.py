@@ -69,8 +69,25 @@ def trajectory_errors(traj, gps: Gps) -> TrajectoryErrors:
     each with :func:`interpolate_poses`. The GPS point is the laser point, the
     position the course's state holds, so no lever arm is applied.
 
-    Raises ValueError for a malformed trajectory, a ``gps`` that is not a
-    :class:`~annslam_lib.data.records.Gps`, or no fix inside the span.
+    Parameters
+    ----------
+    traj : array_like, shape (K, 4)
+        Rows (t, x, y, phi) (s, m, m, rad), times non-decreasing.
+    gps : records.Gps
+        The fixes: times ``t`` (s) and positions ``xy`` (m).
+
+    Returns
+    -------
+    TrajectoryErrors
+        Per fix used (N of them): time, offset (N, 2) and error (N,); the RMSE, mean,
+        max and final error, absolute and after SE(2) alignment.
+
+    Raises
+    ------
+    TypeError
+        For a ``gps`` that is not a :class:`~annslam_lib.data.records.Gps`.
+    ValueError
+        For a malformed trajectory, or no fix inside the span.
     """
     traj = _checks.trajectory("trajectory", traj)
     if not isinstance(gps, Gps):
@@ -107,7 +124,29 @@ def gps_outliers(gps: Gps, max_speed: float = 10.0, tolerance: float = 3.0) -> n
     receiver's own fix-to-fix jitter (in Victoria Park 99 % of the steps between fixes
     0.2 s apart are below 1.8 m, 99.9 % below 4.5 m). Uses the GPS alone, so a receiver
     that jumps and STAYS off is flagged only at the jump: after it, GPS alone cannot tell
-    its offset from the filter's drift."""
+    its offset from the filter's drift.
+
+    Parameters
+    ----------
+    gps : records.Gps
+        The K fixes.
+    max_speed : float, optional
+        Fastest speed of the car, m/s.
+    tolerance : float, optional
+        The receiver's fix-to-fix jitter, m.
+
+    Returns
+    -------
+    ndarray of bool, shape (K,)
+        True at the flagged fixes.
+
+    Raises
+    ------
+    TypeError
+        If ``gps`` is not a records.Gps or a setting is not a number.
+    ValueError
+        For a negative or non-finite setting.
+    """
     _checks.instance("gps", gps, Gps, "records.Gps")
     _checks.real("max_speed", max_speed, lo=0.0)
     _checks.real("tolerance", tolerance, lo=0.0)

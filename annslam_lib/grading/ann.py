@@ -26,21 +26,14 @@ from ..ann.network import forward as reference_forward
 from ..ann.network import mapminmax, mapminmax_reverse
 from ..ann.network import one_torch_thread as _one_thread
 from ..ann.network import train_loop as reference_train_loop
-from .core import allowing_library_calls, forbids, Passed, GradingError, Mistake, call, check_function, fmt
+from .core import (allowing_library_calls, forbids, Passed, GradingError, Mistake, call, check_function,
+                   copying, fmt)
 
 __all__ = ["reference_forward", "check_forward", "mapminmax", "mapminmax_reverse",
            "check_mapminmax", "toy_problem", "reference_train_loop", "LOOP_MISTAKES", "LOOP_ANSWERS",
            "run_loop", "check_train_loop"]
 
 _ERRATUM = next(e for e in paper.ERRATA if e.key == "4.2-ann")
-
-
-def _copying(fn: Callable) -> Callable:
-    """Call ``fn`` on copies, so a student function that edits its input in place cannot
-    change the cases the check compares afterwards."""
-    def run(*args):
-        return fn(*(a.copy() if isinstance(a, np.ndarray) else a for a in args))
-    return run
 
 
 # ----------------------------------------------------------------------------- forward pass
@@ -252,7 +245,7 @@ def check_mapminmax(fn: Callable, fn_reverse: Callable, *, seed: int = 0, n: int
     names = ["x", "xmin", "xmax"]
     name = getattr(fn, "__name__", "my_mapminmax")
     rname = getattr(fn_reverse, "__name__", "my_mapminmax_reverse")
-    fn, fn_reverse = _copying(fn), _copying(fn_reverse)
+    fn, fn_reverse = copying(fn), copying(fn_reverse)
     for x, lo, hi in cases:                 # a constant column first: the usual slip
         const = lo == hi
         if const.any():

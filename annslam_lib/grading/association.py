@@ -9,7 +9,6 @@ is wrong. References: :mod:`annslam_lib.perception.association`.
 """
 from __future__ import annotations
 
-import functools
 import math
 
 import numpy as np
@@ -19,7 +18,8 @@ from scipy.stats._distn_infrastructure import rv_continuous
 from ..perception.association import GATE, NEW, NEW_LANDMARK, REJECTED, associate, gate_threshold, mahalanobis
 from ..models.observation import observe
 from .core import (forbids, Mistake, Passed, call, check_function, check_raises, describe, fail, fmt,
-                   prefetch)
+                   prefetch, wrap_pi)
+from .kalman import chi2_ppf
 
 __all__ = ["check_innovation_d2", "check_in_gate", "check_associate"]
 
@@ -27,10 +27,6 @@ _D2_ARGS = ("z", "zhat", "H", "P", "R")
 
 
 # ----------------------------------------------------------------------------- 4.1 d2
-
-def _wrap(a):
-    return (a + np.pi) % (2 * np.pi) - np.pi
-
 
 def _S(H, P, R):
     S = H @ P @ H.T + R
@@ -53,7 +49,7 @@ def _d2_case(pose, landmark, P, R, nu_or_z, *, absolute=False):
     zhat, Hp, Hm = observe(pose, landmark)
     H = np.concatenate([Hp, Hm], axis=1)
     z = np.asarray(nu_or_z, float) if absolute else zhat + np.asarray(nu_or_z, float)
-    z = np.array([z[0], _wrap(z[1])])
+    z = np.array([z[0], wrap_pi(z[1])])
     return (z, zhat, H, P, R)
 
 
@@ -90,7 +86,7 @@ def _d2_cases(seed: int, n: int) -> list[tuple]:
 def _quadratic(f):
     """A wrong d2 built as nu' f(S, R) nu with the right (wrapped) innovation."""
     def wrong(z, zhat, H, P, R):
-        nu = np.array([z[0] - zhat[0], _wrap(z[1] - zhat[1])])
+        nu = np.array([z[0] - zhat[0], wrap_pi(z[1] - zhat[1])])
         return float(nu @ f(_S(H, P, R), H @ P @ H.T, R) @ nu)
     return wrong
 
@@ -177,12 +173,6 @@ def check_innovation_d2(fn, *, seed: int = 0, n: int = 40,
 _PROBS = (0.5, 0.9, 0.95, 0.99, 0.999, 0.9999)
 
 
-@functools.lru_cache(maxsize=None)
-def _ppf(p: float, dof: int) -> float:
-    """chi2.ppf, cached: the gate check evaluates a few quantiles many times."""
-    return float(chi2.ppf(p, dof))
-
-
 def _gate_cases(seed: int, n: int) -> list[tuple]:
     """(d2, prob): around each threshold, the 1-dof / 2-dof gap (6.63..9.21 at 99 %),
     just above and below 9 ('3 sigma'), 0 and +inf, then ``n`` seeded random pairs;
@@ -191,12 +181,12 @@ def _gate_cases(seed: int, n: int) -> list[tuple]:
              (math.inf, 0.99), (3.5, 0.95), (5.5, 0.9), (4.0, 0.9), (12.0, 0.999),
              (15.0, 0.9999), (1.0, 0.5), (1.5, 0.5)]
     for p in _PROBS:
-        t = _ppf(p, 2)
+        t = chi2_ppf(p, 2)
         cases += [(f * t, p) for f in (0.5, 0.97, 1.03, 2.0)]
     rng = np.random.default_rng(seed)
     cases += [(float(rng.uniform(0, 25)), float(rng.choice(_PROBS))) for _ in range(n)]
     return [(d, p) for d, p in cases
-            if not math.isfinite(d) or abs(d - _ppf(p, 2)) > 1e-6 * _ppf(p, 2)]
+            if not math.isfinite(d) or abs(d - chi2_ppf(p, 2)) > 1e-6 * chi2_ppf(p, 2)]
 
 
 #: The gate of exercise 4.2 (what the answers of its mistakes give away).
@@ -204,22 +194,22 @@ _GATE = "−2 ln(1 − prob) = chi2.ppf(prob, 2)"
 
 
 def _gate_mistakes(name: str) -> list[Mistake]:
-    t99 = _ppf(0.99, 2)
+    t99 = chi2_ppf(0.99, 2)
     return [
         Mistake(f"{name} uses the threshold of a chi-square with 1 degree of freedom: how many "
                 "components has the innovation, and what does that make the distribution of "
-                "d2?", lambda d, p: d <= _ppf(p, 1),
-                f"The gate is d2 <= {_GATE} ({t99:.2f} at 99 %, not {_ppf(0.99, 1):.2f})."),
+                "d2?", lambda d, p: d <= chi2_ppf(p, 1),
+                f"The gate is d2 <= {_GATE} ({t99:.2f} at 99 %, not {chi2_ppf(0.99, 1):.2f})."),
         Mistake(f"{name} uses the threshold that only the share 1 − prob of the true "
                 "measurements stay below; the gate lets through the share prob. Check which "
-                "side of the disc your probability is.", lambda d, p: d <= _ppf(1 - p, 2),
+                "side of the disc your probability is.", lambda d, p: d <= chi2_ppf(1 - p, 2),
                 "P(d2 <= t) = 1 − exp(−t/2), so the gate is d2 <= −2 ln(1 − prob), "
                 "not −2 ln(prob)."),
         Mistake(f"{name} compares √d2 with the threshold: the threshold is for the SQUARED "
-                "distance.", lambda d, p: math.sqrt(d) <= _ppf(p, 2),
+                "distance.", lambda d, p: math.sqrt(d) <= chi2_ppf(p, 2),
                 f"Compare d2 itself with {_GATE}."),
         Mistake(f"{name} compares d2 with the square root of the threshold: d2 is already "
-                "squared.", lambda d, p: d <= math.sqrt(_ppf(p, 2)),
+                "squared.", lambda d, p: d <= math.sqrt(chi2_ppf(p, 2)),
                 f"Compare it with {_GATE} itself."),
         Mistake(f"{name} uses d2 <= 9, the one-dimensional '3σ' rule. In two dimensions the "
                 "3σ ellipse holds only 98.9 %; the gate must follow prob.",
@@ -228,7 +218,7 @@ def _gate_mistakes(name: str) -> list[Mistake]:
                 "threshold must follow the argument.", lambda d, p: d <= t99,
                 f"The gate is d2 <= {_GATE}."),
         Mistake(f"{name} is inverted: it must return True when the measurement is INSIDE the "
-                "gate, i.e. when it may come from the landmark.", lambda d, p: d > _ppf(p, 2),
+                "gate, i.e. when it may come from the landmark.", lambda d, p: d > chi2_ppf(p, 2),
                 f"Inside means d2 <= {_GATE}."),
     ]
 
@@ -259,14 +249,14 @@ def check_in_gate(fn, *, seed: int = 0, n: int = 40, name: str = "my_in_gate",
     prefetch(fn, cases)
     got = [_as_bool(call(fn, c, name=name, arg_names=names), name, describe(c, names))
            for c in cases]
-    exp = [c[0] <= _ppf(c[1], 2) for c in cases]
+    exp = [c[0] <= chi2_ppf(c[1], 2) for c in cases]
     if got != exp:
         for m in _gate_mistakes(name):
             if [bool(m.wrong(*c)) for c in cases] == got:
                 fail(m.text)
         bad = [k for k in range(len(cases)) if got[k] != exp[k]]
         d, p = cases[bad[0]]
-        t = _ppf(p, 2)
+        t = chi2_ppf(p, 2)
         fail(Mistake(f"{name} decides wrongly at {len(bad)} of {len(cases)} inputs. First: "
                      f"{name}(d2={fmt(d)}, prob={p}) returned {got[bad[0]]}, but the "
                      f"measurement is {'inside (True)' if exp[bad[0]] else 'outside (False)'} "

@@ -17,7 +17,6 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import functools
-import os
 import sys
 import threading
 import types
@@ -26,9 +25,11 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from .. import _settings
+
 __all__ = ["GradingError", "Mistake", "Passed", "passed", "call", "check_function", "check_jacobian", "check_raises",
            "describe", "fail", "fmt", "NOT_WRITTEN", "forbids", "forbidden", "watch_calls",
-           "function_path", "prefetch", "labelled", "passing_prefetch",
+           "function_path", "prefetch", "labelled", "passing_prefetch", "copying", "wrap_pi",
            "allowing_library_calls", "full_feedback", "is_full_feedback",
            "graded_student", "grading_student"]
 
@@ -226,7 +227,7 @@ class Mistake:
 
 
 _FULL_FEEDBACK: contextvars.ContextVar[bool] = contextvars.ContextVar(
-    "annslam_full_feedback", default=os.environ.get("ANNSLAM_FEEDBACK", "") == "full")
+    "annslam_full_feedback", default=_settings.full_feedback())
 
 
 _STUDENT: contextvars.ContextVar[str | None] = contextvars.ContextVar("annslam_student",
@@ -326,6 +327,14 @@ def passing_prefetch(wrapper: Callable, fn: Callable) -> Callable:
     return wrapper
 
 
+def copying(fn: Callable) -> Callable:
+    """Call ``fn`` on copies, so a student function that edits its input in place cannot
+    change the cases the check compares afterwards."""
+    def run(*args):
+        return fn(*(a.copy() if isinstance(a, np.ndarray) else a for a in args))
+    return run
+
+
 def call(fn: Callable, args: Sequence, *, name: str, arg_names: Sequence[str] | None = None):
     """Call the student's ``fn(*args)`` and turn what it raises into a :class:`GradingError`
     that names the function and the input (NotImplementedError: not written yet)."""
@@ -365,7 +374,10 @@ def _as_numbers(name: str, out, shape: tuple, where: str) -> np.ndarray:
     return a
 
 
-def _wrap(a):
+def wrap_pi(a):
+    """Angles wrapped to [-pi, pi) by the modulo, NaN passed through (a student's NaN must
+    reach the comparison)."""
+    # not models.geometry.wrap_angle: that one maps to (-pi, pi] and rejects NaN
     return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
 
 
@@ -405,7 +417,7 @@ def _evaluate(fn, reference, cases, *, name, arg_names, output, angle_mask, atol
     got, exp = np.array(got), np.array(exp)
     with np.errstate(invalid="ignore"):
         err = got - exp
-        err = np.where(angle_mask, _wrap(err), err)
+        err = np.where(angle_mask, wrap_pi(err), err)
         tol = atol + rtol * np.abs(exp)
         bad = ~(np.abs(err) <= tol)  # NaN counts as bad
         if wrap_mask is not None and wrap_mask.any():  # must lie in (-pi, pi]
@@ -452,7 +464,7 @@ def _diagnose(run: _Run, *, name, labels, angle_mask, wrap_mask, mistakes, cases
         except Exception:  # the wrong form may be undefined on some case: then it is not this
             continue
         if wrong.shape == got.shape:
-            d = np.where(angle_mask, _wrap(got - wrong), got - wrong)
+            d = np.where(angle_mask, wrap_pi(got - wrong), got - wrong)
             if _close(d, 0, tol) and not _close(wrong, exp, tol):
                 return m.text
     # 3. patterns over all cases
@@ -496,7 +508,7 @@ def _entry_notes(run: _Run, *, labels, angle_mask, wrap_mask, angle_hint) -> dic
 
 def _entry_note(g, e, t, where, lab, angle: bool, wrap: bool, angle_hint: str) -> str | None:
     if angle:
-        d = _wrap(g - e)
+        d = wrap_pi(g - e)
         if _close(d, 0, t):
             if wrap and not _close(g, e, t):
                 k = int(np.argmax(np.abs(g - e) > t))
@@ -507,7 +519,7 @@ def _entry_note(g, e, t, where, lab, angle: bool, wrap: bool, angle_hint: str) -
         if _close(g, np.degrees(e), np.degrees(t)):
             return f"{lab} is in degrees; the course works in radians."
         off = float(np.median(d))
-        if _close(_wrap(d - off), 0, t) and abs(off) > 1e-6:
+        if _close(wrap_pi(d - off), 0, t) and abs(off) > 1e-6:
             deg = np.degrees(off)
             amount = "180°" if abs(abs(deg) - 180) < 1e-3 else f"{deg:+.1f}°"
             msg = (f"{lab} is off by a constant {amount} at every input (e.g. at {where[0]}: "

@@ -6,7 +6,7 @@ state and measurement size, with a ValueError when S is not positive definite.
 ``check_gate``: the chi-square gate of an innovation of any dimension.
 ``check_steady_state``: the stationary posterior variance of a 1-D filter, derived from
 the scalar Riccati equation. References: :mod:`annslam_lib.slam.kalman` and
-:func:`annslam_lib.slam.dense.kalman_gain`.
+:func:`annslam_lib.slam.kalman.kalman_gain`.
 """
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from ..slam import kalman
-from ..slam.dense import kalman_gain
+from ..slam.kalman import kalman_gain
 from .core import GradingError, Mistake, passed, call, check_function, check_raises, describe, fail, forbids, prefetch
 
 __all__ = ["check_update_1d", "check_kalman_gain", "check_gate", "check_steady_state"]
@@ -155,7 +155,7 @@ def check_kalman_gain(fn, *, seed: int = 0, n: int = 30, name: str = "my_kalman_
                       quiet: bool = False) -> str:
     """Grade ``fn(P, H, R) -> K``, chapter 01a eq. 1a.6: K = P H^T S^-1 with
     S = H P H^T + R, for any state size n and measurement size m (K is n x m); ValueError
-    when S is not positive definite. Reference: ``dense.kalman_gain``.
+    when S is not positive definite. Reference: ``kalman.kalman_gain``.
 
     Catches R^-1 instead of S^-1, S instead of S^-1, S without R, an elementwise division
     by S (right only when m = 1), only S's diagonal, and H^T S^-1 without P.
@@ -189,7 +189,7 @@ def check_kalman_gain(fn, *, seed: int = 0, n: int = 30, name: str = "my_kalman_
     for H_shape, group in sorted(shapes.items(), key=lambda kv: kv[0][0] > 1):
         _check_shapes(fn, group, name=name, scalar_ok=H_shape[0] > 1)
         check_function(fn, _gain_reference, group, name=name, arg_names=_K_ARGS,
-                       mistakes=mistakes, what="dense.kalman_gain", quiet=True, rtol=1e-6,
+                       mistakes=mistakes, what="kalman.kalman_gain", quiet=True, rtol=1e-6,
                        atol=1e-9)
     v = np.array([[1.0, 2.0, 0.5]])
     bad = [((np.zeros((2, 2)), np.eye(2), np.zeros((2, 2))), "P = 0 and R = 0 make S = 0: a "
@@ -202,7 +202,7 @@ def check_kalman_gain(fn, *, seed: int = 0, n: int = 30, name: str = "my_kalman_
             "no covariance")]
     for args, why in bad:
         check_raises(fn, args, name=name, why=why, arg_names=_K_ARGS)
-    return passed(f"✓ {name} agrees with dense.kalman_gain on {len(cases)} inputs (states of 1 "
+    return passed(f"✓ {name} agrees with kalman.kalman_gain on {len(cases)} inputs (states of 1 "
                   f"to 6 entries, measurements of 1 to 6) and raises ValueError for all "
                   f"{len(bad)} S that are not positive definite.", quiet)
 
@@ -242,7 +242,10 @@ _PROBS = (0.9, 0.95, 0.99, 0.999)
 
 
 @functools.lru_cache(maxsize=None)
-def _ppf(p: float, dof: int) -> float:
+def chi2_ppf(p: float, dof: float) -> float:
+    """chi2.ppf as a float, cached: the gate checks (here, ``localisation``,
+    ``association``) evaluate a few quantiles many times."""
+    # not models.uncertainty.chi2_quantile: its closed form at 2 dof differs in the last bits
     return float(chi2.ppf(p, dof))
 
 
@@ -262,14 +265,14 @@ def _gate_cases(seed: int, n: int) -> list[tuple]:
                 S = _random_cov(rng, dof, 0.5)
                 u = rng.normal(size=dof)
                 u /= math.sqrt(u @ np.linalg.solve(S, u))       # d2(u) = 1
-                cases.append((u * math.sqrt(f * _ppf(p, dof)), S, p))
+                cases.append((u * math.sqrt(f * chi2_ppf(p, dof)), S, p))
     for _ in range(n):
         dof = int(rng.integers(1, 4))
         S = _random_cov(rng, dof, 10 ** rng.uniform(-1, 1))
         nu = rng.multivariate_normal(np.zeros(dof), S) * rng.choice([1.0, 2.0, 3.0])
         d2 = nu @ np.linalg.solve(S, nu)
         p = float(rng.choice(_PROBS))
-        if abs(d2 - _ppf(p, dof)) > 1e-6 * _ppf(p, dof):
+        if abs(d2 - chi2_ppf(p, dof)) > 1e-6 * chi2_ppf(p, dof):
             cases.append((nu, S, p))
     return cases
 
@@ -283,26 +286,26 @@ def _gate_mistakes(name: str) -> list[Mistake]:
         Mistake(f"{name} always uses 2 degrees of freedom. d2 = νᵀ S⁻¹ ν has as many "
                 "degrees of freedom as ν has entries: a GPS height alone has 1, a "
                 "range-bearing pair 2, a 3-D position 3.",
-                lambda nu, S, p: _d2(nu, S) <= _ppf(p, 2), answer="Use chi2.ppf(p, len(nu))."),
+                lambda nu, S, p: _d2(nu, S) <= chi2_ppf(p, 2), answer="Use chi2.ppf(p, len(nu))."),
         Mistake(f"{name} always uses 1 degree of freedom, whatever the size of ν.",
-                lambda nu, S, p: _d2(nu, S) <= _ppf(p, 1), answer="Use chi2.ppf(p, len(nu))."),
+                lambda nu, S, p: _d2(nu, S) <= chi2_ppf(p, 1), answer="Use chi2.ppf(p, len(nu))."),
         Mistake(f"{name} uses the quantile of 1 − p: that threshold keeps only 1 − p of the "
                 "right measurements, and the gate must keep the share p.",
-                lambda nu, S, p: _d2(nu, S) <= _ppf(1 - p, len(nu)),
+                lambda nu, S, p: _d2(nu, S) <= chi2_ppf(1 - p, len(nu)),
                 answer="The threshold is chi2.ppf(p, dof)."),
         Mistake(f"{name} compares the distance √d2 with the chi-square quantile: the "
                 "quantile is for the squared distance d2 = νᵀ S⁻¹ ν.",
-                lambda nu, S, p: math.sqrt(_d2(nu, S)) <= _ppf(p, len(nu))),
+                lambda nu, S, p: math.sqrt(_d2(nu, S)) <= chi2_ppf(p, len(nu))),
         Mistake(f"{name} computes νᵀ S ν: the Mahalanobis distance divides by the "
                 "uncertainty, it does not multiply by it.",
-                lambda nu, S, p: float(nu @ S @ nu) <= _ppf(p, len(nu)),
+                lambda nu, S, p: float(nu @ S @ nu) <= chi2_ppf(p, len(nu)),
                 answer="d2 = νᵀ S⁻¹ ν."),
         Mistake(f"{name} uses only the diagonal of S: the components of ν are correlated "
                 "(S has off-diagonal terms), so d2 needs the full inverse.",
-                lambda nu, S, p: float(np.sum(nu**2 / np.diag(S))) <= _ppf(p, len(nu))),
+                lambda nu, S, p: float(np.sum(nu**2 / np.diag(S))) <= chi2_ppf(p, len(nu))),
         Mistake(f"{name} is inverted: it must return True when the innovation is INSIDE the "
                 "gate (d2 <= threshold), i.e. when the measurement is accepted.",
-                lambda nu, S, p: _d2(nu, S) > _ppf(p, len(nu))),
+                lambda nu, S, p: _d2(nu, S) > chi2_ppf(p, len(nu))),
     ]
 
 
@@ -336,7 +339,7 @@ def check_gate(fn, *, seed: int = 0, n: int = 40, name: str = "my_gate",
                 fail(m.text)
         k = next(i for i in range(len(cases)) if got[i] != exp[i])
         nu, S, p = cases[k]
-        d2, t = _d2(nu, S), _ppf(p, len(nu))
+        d2, t = _d2(nu, S), chi2_ppf(p, len(nu))
         fail(f"{name}({describe(cases[k], _G_ARGS)}) returned {got[k]}, expected {exp[k]}: "
              f"d2 = νᵀ S⁻¹ ν = {d2:.4g} against chi2.ppf({p}, {len(nu)}) = {t:.4g}. "
              f"{sum(g != e for g, e in zip(got, exp))} of {len(cases)} decisions differ.")

@@ -7,15 +7,15 @@ References: :mod:`annslam_lib.slam.localisation`.
 """
 from __future__ import annotations
 
-import functools
 import math
 
 import numpy as np
-from scipy.stats import chi2
 
 from ..models.observation import observe
 from ..slam import dense, localisation
-from .core import Mistake, passed, call, check_function, check_raises, describe, fail, forbids, prefetch
+from .core import (Mistake, passed, call, check_function, check_raises, describe, fail, forbids, prefetch,
+                   wrap_pi)
+from .kalman import chi2_ppf
 
 __all__ = ["check_beacon_update", "check_nis_verdict"]
 
@@ -35,23 +35,19 @@ def _reference(pose, P, z, beacon, R):
     return new, P_new
 
 
-def _wrap(a):
-    return (a + np.pi) % (2 * np.pi) - np.pi
-
-
 def _variant(*, H_of=lambda Hp, Hm: Hp, nu_of=None, R_used=True, wrap_heading=True):
     """A wrong update built from the right pieces with one of them changed."""
     def wrong(pose, P, z, beacon, R):
         zhat, Hp, Hm = observe(np.asarray(pose, float), np.asarray(beacon, float))
         H = H_of(Hp, Hm)
         nu = np.asarray(z, float) - zhat
-        nu = nu_of(nu) if nu_of else np.array([nu[0], _wrap(nu[1])])
+        nu = nu_of(nu) if nu_of else np.array([nu[0], wrap_pi(nu[1])])
         Rr = np.asarray(R, float) if R_used else np.zeros((2, 2))
         S = H @ P @ H.T + Rr
         K = P @ H.T @ np.linalg.inv(S)
         new = np.asarray(pose, float) + K @ nu
         if wrap_heading:
-            new[2] = _wrap(new[2])
+            new[2] = wrap_pi(new[2])
         IKH = np.eye(3) - K @ H
         return _flat((new, IKH @ P @ IKH.T + K @ np.asarray(R, float) @ K.T))
     return wrong
@@ -76,7 +72,7 @@ def _cases(seed: int, n: int) -> list[tuple]:
     b = pose[:2] + 8 * np.array([math.cos(pose[2] - 0.3), math.sin(pose[2] - 0.3)])
     zhat, _, _ = observe(pose, b)
     cases.append((pose, np.diag([0.3**2, 0.3**2, math.radians(5.0) ** 2]),
-                  np.array([zhat[0], _wrap(zhat[1] - 0.06)]), b, R0))
+                  np.array([zhat[0], wrap_pi(zhat[1] - 0.06)]), b, R0))
     cases.append((np.array([5.0, -3.0, 0.4]), P0, None, np.array([12.0, 1.0]), R0))
     cases.append((np.array([5.0, -3.0, 0.4]), P0, None, np.array([-4.0, -7.0]), R0))
     rng = np.random.default_rng(seed)
@@ -94,7 +90,7 @@ def _cases(seed: int, n: int) -> list[tuple]:
             zhat, Hp, _ = observe(pose, beacon)
             S = Hp @ P @ Hp.T + R
             z = zhat + np.random.default_rng(len(out) + 17 * seed).multivariate_normal(np.zeros(2), S)
-            z[1] = _wrap(z[1])
+            z[1] = wrap_pi(z[1])
         out.append((pose, P, z, beacon, R))
     return out
 
@@ -127,7 +123,7 @@ def check_beacon_update(fn, *, seed: int = 0, n: int = 40, name: str = "my_beaco
                 _variant(wrap_heading=False)),
         Mistake(f"{name} has the innovation's sign reversed: the correction K ν must move the "
                 "prediction TOWARDS the measurement.",
-                _variant(nu_of=lambda nu: -np.array([nu[0], _wrap(nu[1])])), "ν = z − ẑ."),
+                _variant(nu_of=lambda nu: -np.array([nu[0], wrap_pi(nu[1])])), "ν = z − ẑ."),
         Mistake(f"{name} leaves the laser's noise out of the innovation covariance: the gain "
                 "then trusts the sighting as if the laser had no noise.",
                 _variant(R_used=False), "S = H P Hᵀ + R."),
@@ -151,11 +147,6 @@ def check_beacon_update(fn, *, seed: int = 0, n: int = 40, name: str = "my_beaco
 _V_ARGS = ("nis", "dof", "p")
 
 
-@functools.lru_cache(maxsize=None)
-def _ppf(q: float, D: float) -> float:
-    return float(chi2.ppf(q, D))
-
-
 def _verdict_cases(seed: int, n: int) -> list[tuple]:
     """Runs of 1 to 300 updates with 2 or 4 dof each (mixed), whose average NIS per dof
     sits inside, just inside, just outside and far outside the band on either side, for
@@ -166,7 +157,7 @@ def _verdict_cases(seed: int, n: int) -> list[tuple]:
         dof = rng.choice([2.0, 4.0], size=m)
         D = dof.sum()
         for p in (0.9, 0.95, 0.99):
-            lo, hi = _ppf((1 - p) / 2, D) / D, _ppf((1 + p) / 2, D) / D
+            lo, hi = chi2_ppf((1 - p) / 2, D) / D, chi2_ppf((1 + p) / 2, D) / D
             for target in (0.5 * lo, 0.98 * lo, 1.02 * lo, 0.5 * (lo + hi), 0.98 * hi, 1.02 * hi, 2 * hi):
                 w = rng.uniform(0.5, 1.5, m)
                 nis = w / w.sum() * target * D                   # average NIS/dof = target
@@ -187,25 +178,25 @@ def _verdict_of(avg, lo, hi):
 def _verdict_mistakes(name: str) -> list[Mistake]:
     def one_sided(nis, dof, p):
         D = float(np.sum(dof))
-        return _verdict_of(np.sum(nis) / D, -math.inf, _ppf(p, D) / D)
+        return _verdict_of(np.sum(nis) / D, -math.inf, chi2_ppf(p, D) / D)
 
     def same_q(nis, dof, p):                 # both bounds from p: chi2.ppf(1 - p), chi2.ppf(p)
         D = float(np.sum(dof))
-        return _verdict_of(np.sum(nis) / D, _ppf(1 - p, D) / D, _ppf(p, D) / D)
+        return _verdict_of(np.sum(nis) / D, chi2_ppf(1 - p, D) / D, chi2_ppf(p, D) / D)
 
     def per_update(nis, dof, p):             # the band of ONE update, not of the average
         d = float(np.mean(dof))
-        return _verdict_of(np.sum(nis) / np.sum(dof), _ppf((1 - p) / 2, d) / d,
-                           _ppf((1 + p) / 2, d) / d)
+        return _verdict_of(np.sum(nis) / np.sum(dof), chi2_ppf((1 - p) / 2, d) / d,
+                           chi2_ppf((1 + p) / 2, d) / d)
 
     def count_not_dof(nis, dof, p):          # D = number of updates
         D = float(len(nis))
-        return _verdict_of(np.sum(nis) / np.sum(dof), _ppf((1 - p) / 2, D) / D,
-                           _ppf((1 + p) / 2, D) / D)
+        return _verdict_of(np.sum(nis) / np.sum(dof), chi2_ppf((1 - p) / 2, D) / D,
+                           chi2_ppf((1 + p) / 2, D) / D)
 
     def not_per_dof(nis, dof, p):            # the mean NIS against a band per dof
         D = float(np.sum(dof))
-        return _verdict_of(np.mean(nis), _ppf((1 - p) / 2, D) / D, _ppf((1 + p) / 2, D) / D)
+        return _verdict_of(np.mean(nis), chi2_ppf((1 - p) / 2, D) / D, chi2_ppf((1 + p) / 2, D) / D)
 
     def swapped(nis, dof, p):
         v = localisation.nis_verdict(nis, dof, p)[0]

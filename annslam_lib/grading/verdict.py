@@ -24,20 +24,12 @@ import numpy as np
 from .. import ann
 from ..ann.evaluation import regression_line
 from ..evaluation.map import aligned_rmse, map_errors, rigid_align
-from .core import forbids, Passed, GradingError, Mistake, check_function, check_raises
+from .core import forbids, Passed, GradingError, Mistake, check_function, check_raises, copying
 
 __all__ = ["check_rigid_align", "aligned_rmse", "check_aligned_rmse", "regression_line",
            "check_regression"]
 
 _RT_LABELS = ("R[0, 0]", "R[0, 1]", "R[1, 0]", "R[1, 1]", "t_x", "t_y")
-
-
-def _copying(fn: Callable) -> Callable:
-    """Call ``fn`` on copies, so a student function that edits its input in place cannot
-    change the cases the check compares afterwards."""
-    def run(*args):
-        return fn(*(a.copy() if isinstance(a, np.ndarray) else a for a in args))
-    return run
 
 
 def _rot(a: float) -> np.ndarray:
@@ -199,7 +191,7 @@ def check_aligned_rmse(fn: Callable, *, seed: int = 0, n: int = 6, quiet: bool =
     forbidden), and raises ValueError for fewer than 2 pairs."""
     name = getattr(fn, "__name__", "my_aligned_rmse")
     msg_ok = check_function(
-        _copying(fn), aligned_rmse, _pairs(seed, n), name=name, arg_names=["mapped", "true"],
+        copying(fn), aligned_rmse, _pairs(seed, n), name=name, arg_names=["mapped", "true"],
         atol=1e-9, rtol=1e-7, quiet=True, what="the aligned map RMSE (evaluation.map)",
         mistakes=[
             Mistake(f"{name} returns the RMSE WITHOUT the alignment (the absolute error, "
@@ -284,7 +276,7 @@ def check_regression(fn: Callable, *, seed: int = 0, n: int = 6, quiet: bool = F
     target + intercept, R the correlation coefficient."""
     name = getattr(fn, "__name__", "my_regression")
     return check_function(
-        _copying(fn), regression_line, _reg_cases(seed, n), name=name,
+        copying(fn), regression_line, _reg_cases(seed, n), name=name,
         arg_names=["outputs", "targets"],
         labels=("slope", "intercept", "R"), atol=1e-9, rtol=1e-7,
         what="nntool's regression (ann.regression)", quiet=quiet,

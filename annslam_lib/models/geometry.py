@@ -21,7 +21,23 @@ __all__ = ["wrap_angle", "wrap_difference", "rot", "to_frame", "from_frame",
 def wrap_angle(a) -> np.ndarray:
     """Angles wrapped to (-pi, pi]: +pi stays +pi and -pi maps to +pi.
 
-    Returns an array of the input's shape (a NumPy scalar for scalar input)."""
+    Parameters
+    ----------
+    a : float or array_like
+        Angles, rad, any shape.
+
+    Returns
+    -------
+    ndarray
+        The wrapped angles, rad, of the input's shape (a NumPy scalar for scalar input).
+
+    Raises
+    ------
+    TypeError
+        If ``a`` is not numeric.
+    ValueError
+        If ``a`` holds NaN or infinite values.
+    """
     a = _checks.array("angle", a)
     # pi - mod(pi - a, 2 pi): mod is in [0, 2 pi), so the result is in (-pi, pi].
     # Angles already in range pass through untouched, so wrapping is idempotent to the bit.
@@ -30,7 +46,25 @@ def wrap_angle(a) -> np.ndarray:
 
 
 def rot(phi) -> np.ndarray:
-    """Rotation matrix R(phi) = [[cos, -sin], [sin, cos]], shape (..., 2, 2)."""
+    """Rotation matrix R(phi) = [[cos, -sin], [sin, cos]].
+
+    Parameters
+    ----------
+    phi : float or array_like, shape (...)
+        Rotation angle, rad, anticlockwise.
+
+    Returns
+    -------
+    ndarray, shape (..., 2, 2)
+        One rotation matrix per angle.
+
+    Raises
+    ------
+    TypeError
+        If ``phi`` is not numeric.
+    ValueError
+        If ``phi`` holds NaN or infinite values.
+    """
     phi = _checks.array("phi", phi)
     c, s = np.cos(phi), np.sin(phi)
     return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
@@ -39,8 +73,28 @@ def rot(phi) -> np.ndarray:
 def to_frame(pose, p) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Express world point ``p`` in the frame of ``pose``: p_local = R(phi)^T (p - t).
 
-    pose (..., 3), p (..., 2), broadcast over leading dimensions.
-    Returns (p_local (..., 2), J_pose (..., 2, 3), J_p (..., 2, 2)).
+    Parameters
+    ----------
+    pose : array_like, shape (..., 3)
+        Frame pose (x, y, phi) (m, m, rad), broadcast with ``p`` over leading dimensions.
+    p : array_like, shape (..., 2)
+        World point (x, y), m.
+
+    Returns
+    -------
+    p_local : ndarray, shape (..., 2)
+        The point in the frame (x forward, y to the left), m.
+    J_pose : ndarray, shape (..., 2, 3)
+        d p_local / d pose.
+    J_p : ndarray, shape (..., 2, 2)
+        d p_local / d p, that is R(phi)^T.
+
+    Raises
+    ------
+    TypeError
+        If an input is not numeric.
+    ValueError
+        If a last dimension is wrong or a value is not finite.
     """
     pose = _checks.array("pose", pose, (3,))
     p = _checks.array("point", p, (2,))
@@ -59,8 +113,29 @@ def to_frame(pose, p) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def from_frame(pose, p_local) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """World coordinates of ``p_local`` given in the frame of ``pose``: p = t + R(phi) p_local.
 
-    pose (..., 3), p_local (..., 2). Returns (p (..., 2), J_pose (..., 2, 3),
-    J_p_local (..., 2, 2)).
+    Parameters
+    ----------
+    pose : array_like, shape (..., 3)
+        Frame pose (x, y, phi) (m, m, rad), broadcast with ``p_local`` over leading
+        dimensions.
+    p_local : array_like, shape (..., 2)
+        Point in the frame (x forward, y to the left), m.
+
+    Returns
+    -------
+    p : ndarray, shape (..., 2)
+        The point in the world, m.
+    J_pose : ndarray, shape (..., 2, 3)
+        d p / d pose.
+    J_p_local : ndarray, shape (..., 2, 2)
+        d p / d p_local, that is R(phi).
+
+    Raises
+    ------
+    TypeError
+        If an input is not numeric.
+    ValueError
+        If a last dimension is wrong or a value is not finite.
     """
     pose = _checks.array("pose", pose, (3,))
     q = _checks.array("p_local", p_local, (2,))
@@ -80,6 +155,29 @@ def numerical_jacobian(f, x, *, h: float = 1e-6, angle_outputs=()) -> np.ndarray
     Differences of the outputs listed in ``angle_outputs`` are wrapped to
     (-pi, pi], so a heading or bearing crossing +-pi does not create a 2 pi jump.
     Used to check every analytic Jacobian of the course (notebooks 01-03).
+
+    Parameters
+    ----------
+    f : callable
+        ``f(x)`` returns an array_like of m values (a scalar counts as m = 1).
+    x : array_like, shape (n,)
+        The point the Jacobian is taken at.
+    h : float, optional
+        Step of the central differences, in the units of ``x``.
+    angle_outputs : sequence of int, optional
+        Indices of the outputs that are angles (rad), whose differences are wrapped.
+
+    Returns
+    -------
+    ndarray, shape (m, n)
+        d f / d x, (f(x + h e_k) - f(x - h e_k)) / 2h in column k.
+
+    Raises
+    ------
+    TypeError
+        If ``x`` is not numeric.
+    ValueError
+        If ``x`` is not one-dimensional or not finite.
     """
     x = _checks.array("x", x)
     if x.ndim != 1:
@@ -112,10 +210,23 @@ def interpolate_poses(traj, t) -> np.ndarray:
     short way round. This assumes consecutive rows differ by less than pi in
     heading, true of any trajectory sampled at the odometry rate.
 
-    traj (K, 4) rows (t, x, y, phi); t scalar or 1-D, every time inside
-    [traj[0, 0], traj[-1, 0]]. Returns (3,) for a scalar t, else (N, 3).
-    Raises ValueError for a malformed trajectory, non-finite times, or a time
-    outside the trajectory's span (no extrapolation).
+    Parameters
+    ----------
+    traj : array_like, shape (K, 4)
+        Rows (t, x, y, phi) (s, m, m, rad), times non-decreasing.
+    t : float or array_like, shape (N,)
+        Times, s, every one inside [traj[0, 0], traj[-1, 0]].
+
+    Returns
+    -------
+    ndarray, shape (3,) or (N, 3)
+        Poses (x, y, phi): (3,) for a scalar ``t``, else one row per time.
+
+    Raises
+    ------
+    ValueError
+        For a malformed trajectory, non-finite times, or a time outside the
+        trajectory's span (no extrapolation).
     """
     traj = _checks.trajectory("trajectory", traj)
     t_arr = _checks.array("t", t)

@@ -47,9 +47,31 @@ def axle_speed(encoder_speed, steering, vehicle: Vehicle):
 
     The encoder wheel runs on a circle of radius R - H around the instantaneous
     centre of rotation, R = L / tan(alpha), so v_e = v_c (R - H) / R.
-    Elementwise over broadcast arrays. Returns (v_c, J) with J (..., 2) =
-    d v_c / d(v_e, alpha). Raises ValueError for |alpha| >= pi/2 or a
-    denominator |1 - tan(alpha) H / L| < 1e-6 (the encoder wheel on the ICR).
+    Elementwise over broadcast arrays.
+
+    Parameters
+    ----------
+    encoder_speed : float or array_like, shape (...)
+        Speed v_e of the back-left encoder wheel, m/s.
+    steering : float or array_like, shape (...)
+        Steering angle alpha, rad, broadcast with ``encoder_speed``.
+    vehicle : Vehicle
+        The car; its wheelbase ``L`` and encoder offset ``H`` are used.
+
+    Returns
+    -------
+    v_c : float or ndarray, shape (...)
+        Speed of the rear-axle centre, m/s.
+    J : ndarray, shape (..., 2)
+        d v_c / d(v_e, alpha).
+
+    Raises
+    ------
+    TypeError
+        If an input is not numeric or ``vehicle`` is not a :class:`Vehicle`.
+    ValueError
+        For |alpha| >= pi/2, a denominator |1 - tan(alpha) H / L| < 1e-6 (the encoder
+        wheel on the ICR), non-finite values or shapes that do not broadcast.
     """
     veh = _checks.instance("vehicle", vehicle, Vehicle)
     v_e = _checks.array("encoder_speed", encoder_speed)
@@ -69,7 +91,29 @@ def axle_speed(encoder_speed, steering, vehicle: Vehicle):
 def laser_pose(axle_pose, vehicle: Vehicle):
     """Laser pose from the rear-axle pose (x_c, y_c, phi) (section 4.1, P_l equation).
 
-    The heading is passed through unchanged. Returns (pose (..., 3), J (..., 3, 3))."""
+    The heading is passed through unchanged.
+
+    Parameters
+    ----------
+    axle_pose : array_like, shape (..., 3)
+        Rear-axle pose (x_c, y_c, phi) (m, m, rad), any leading (batch) dimensions.
+    vehicle : Vehicle
+        The car; its ``a`` (laser ahead of C) and ``b`` (to the left) are used.
+
+    Returns
+    -------
+    pose : ndarray, shape (..., 3)
+        Laser pose (x_l, y_l, phi).
+    J : ndarray, shape (..., 3, 3)
+        d pose / d axle_pose.
+
+    Raises
+    ------
+    TypeError
+        If ``axle_pose`` is not numeric or ``vehicle`` is not a :class:`Vehicle`.
+    ValueError
+        If the last dimension of ``axle_pose`` is not 3, or it is not finite.
+    """
     veh = _checks.instance("vehicle", vehicle, Vehicle)
     p = _checks.array("axle_pose", axle_pose, (3,))
     c, s = np.cos(p[..., 2]), np.sin(p[..., 2])
@@ -143,7 +187,28 @@ def laser_velocity(pose, control, vehicle: Vehicle) -> np.ndarray:
         ydot   = v_c sin(phi) + v_c/L tan(alpha) (a cos(phi) - b sin(phi))
         phidot = v_c/L tan(alpha)
 
-    pose (..., 3), control (..., 2) = (v_c, alpha). Returns (..., 3) = (xdot, ydot, phidot).
+    Parameters
+    ----------
+    pose : array_like, shape (..., 3)
+        Laser pose (x, y, phi) (m, m, rad).
+    control : array_like, shape (..., 2)
+        (v_c, alpha): rear-axle-centre speed, m/s, and steering angle, rad; broadcast with
+        ``pose`` over leading dimensions.
+    vehicle : Vehicle
+        The car (``L``, ``a``, ``b``).
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        (xdot, ydot, phidot) (m/s, m/s, rad/s).
+
+    Raises
+    ------
+    TypeError
+        If an input is not numeric or ``vehicle`` is not a :class:`Vehicle`.
+    ValueError
+        If a last dimension is wrong, a value is not finite, the shapes do not broadcast,
+        or |alpha| >= pi/2.
     """
     veh = _checks.instance("vehicle", vehicle, Vehicle)
     pose, control = _pose_control(pose, control)
@@ -180,9 +245,33 @@ def predict(pose, control, dt, vehicle: Vehicle):
 
         pose_next = pose + dt * laser_velocity(pose, control), heading wrapped to (-pi, pi].
 
-    pose (..., 3), control (..., 2) = (v_c, alpha), dt scalar or (...,) seconds >= 0,
-    all broadcast over leading dimensions. Returns (pose_next (..., 3),
-    F = d pose_next / d pose (..., 3, 3), G = d pose_next / d control (..., 3, 2)).
+    Parameters
+    ----------
+    pose : array_like, shape (..., 3)
+        Laser pose (x, y, phi) (m, m, rad).
+    control : array_like, shape (..., 2)
+        (v_c, alpha): rear-axle-centre speed, m/s, and steering angle, rad.
+    dt : float or array_like, shape (...)
+        Time step, s, >= 0. All three are broadcast over leading dimensions.
+    vehicle : Vehicle
+        The car (``L``, ``a``, ``b``).
+
+    Returns
+    -------
+    pose_next : ndarray, shape (..., 3)
+        Pose after ``dt``, heading wrapped to (-pi, pi].
+    F : ndarray, shape (..., 3, 3)
+        d pose_next / d pose.
+    G : ndarray, shape (..., 3, 2)
+        d pose_next / d control.
+
+    Raises
+    ------
+    TypeError
+        If an input is not numeric or ``vehicle`` is not a :class:`Vehicle`.
+    ValueError
+        If a last dimension is wrong, a value is not finite, the shapes do not broadcast,
+        |alpha| >= pi/2 or dt < 0.
     """
     veh = _checks.instance("vehicle", vehicle, Vehicle)
     pose, control = _pose_control(pose, control)
@@ -205,7 +294,30 @@ def predict_exact(pose, control, dt, vehicle: Vehicle) -> np.ndarray:
     s = v_c dt and dphi = s tan(alpha) / L, the axle advances by
     s (sin(dphi)/dphi, (1 - cos(dphi))/dphi) in its own frame, written with
     sinc so alpha -> 0 needs no special case. Heading wrapped to (-pi, pi].
-    Shapes as in :func:`predict`; returns pose_next (..., 3).
+
+    Parameters
+    ----------
+    pose : array_like, shape (..., 3)
+        Laser pose (x, y, phi) (m, m, rad).
+    control : array_like, shape (..., 2)
+        (v_c, alpha): rear-axle-centre speed, m/s, and steering angle, rad.
+    dt : float or array_like, shape (...)
+        Time step, s, >= 0. All three are broadcast over leading dimensions.
+    vehicle : Vehicle
+        The car (``L``, ``a``, ``b``).
+
+    Returns
+    -------
+    pose_next : ndarray, shape (..., 3)
+        Pose after ``dt``, heading wrapped to (-pi, pi].
+
+    Raises
+    ------
+    TypeError
+        If an input is not numeric or ``vehicle`` is not a :class:`Vehicle`.
+    ValueError
+        If a last dimension is wrong, a value is not finite, the shapes do not broadcast,
+        |alpha| >= pi/2 or dt < 0.
     """
     veh = _checks.instance("vehicle", vehicle, Vehicle)
     pose, control = _pose_control(pose, control)
@@ -237,8 +349,34 @@ def control_table(odometry, vehicle: Vehicle, sigma_speed: float, sigma_steer: f
     sample: the median interval).
 
     Precomputed once, vectorised: the scalar per-step code then only needs cos/sin(phi).
-    A list of tuples; with ``array=True`` the (K, 9) array of the same rows
-    (``slam.stretches.compound`` takes it).
+
+    Parameters
+    ----------
+    odometry : records.Odometry
+        K samples: times ``t`` (s), encoder ``speed`` (m/s) and ``steering`` (rad).
+    vehicle : Vehicle
+        The car (``L``, ``H``).
+    sigma_speed : float
+        Standard deviation of the encoder speed, m/s.
+    sigma_steer : float
+        Standard deviation of the steering angle, rad.
+    steer_gain : float, optional
+        Growth of the steering standard deviation with |alpha|, rad per rad.
+    array : bool, optional
+        Return the rows as one array instead of a list of tuples.
+
+    Returns
+    -------
+    list of tuple or ndarray, shape (K, 9)
+        One row (v_c, alpha, tan alpha, w, dw/dalpha, q00, q01, q11, Delta_k) per
+        sample; with ``array=True`` the (K, 9) array of the same rows
+        (``slam.stretches.compound`` takes it).
+
+    Raises
+    ------
+    ValueError
+        As :func:`axle_speed`, for a steering angle with |alpha| >= pi/2 or on the
+        singular steering.
     """
     v_c, J = axle_speed(odometry.speed, odometry.steering, vehicle)
     v_c, J = np.atleast_1d(v_c), np.atleast_2d(J)

@@ -71,11 +71,33 @@ def _from_polar(z):
 def observe(pose, landmark):
     """Predicted measurement z = (range, bearing) of ``landmark`` from the laser ``pose``.
 
-    pose (..., 3), landmark (..., 2), broadcast (e.g. pose (3,), landmark (M, 2)).
-    Returns (z (..., 2), H_pose (..., 2, 3), H_landmark (..., 2, 2)); analytically
-    H_pose = [[-dx/r, -dy/r, 0], [dy/r^2, -dx/r^2, -1]], H_landmark = [[dx/r, dy/r],
-    [-dy/r^2, dx/r^2]] with (dx, dy) = landmark - position. Raises ValueError for a
-    landmark within 1e-9 m of the sensor (bearing undefined).
+    Analytically H_pose = [[-dx/r, -dy/r, 0], [dy/r^2, -dx/r^2, -1]], H_landmark =
+    [[dx/r, dy/r], [-dy/r^2, dx/r^2]] with (dx, dy) = landmark - position.
+
+    Parameters
+    ----------
+    pose : array_like, shape (..., 3)
+        Laser pose (x, y, phi) (m, m, rad).
+    landmark : array_like, shape (..., 2)
+        Landmark position (x_i, y_i), m; broadcast with ``pose`` (e.g. pose (3,),
+        landmark (M, 2)).
+
+    Returns
+    -------
+    z : ndarray, shape (..., 2)
+        (range, bearing) (m, rad), bearing in (-pi, pi], pi/2 straight ahead.
+    H_pose : ndarray, shape (..., 2, 3)
+        d z / d pose.
+    H_landmark : ndarray, shape (..., 2, 2)
+        d z / d landmark.
+
+    Raises
+    ------
+    TypeError
+        If an input is not numeric.
+    ValueError
+        For a landmark within 1e-9 m of the sensor (bearing undefined), a wrong last
+        dimension, non-finite values or shapes that do not broadcast.
     """
     pose = _checks.array("pose", pose, (3,))
     landmark = _checks.array("landmark", landmark, (2,))
@@ -92,8 +114,29 @@ def inverse_observe(pose, z):
     """Landmark position from a measurement (landmark initialisation):
     landmark = (x + r cos(phi + beta - pi/2), y + r sin(phi + beta - pi/2)).
 
-    pose (..., 3), z (..., 2) = (range > 0, bearing), broadcast. Returns
-    (landmark (..., 2), J_pose (..., 2, 3), J_z (..., 2, 2)).
+    Parameters
+    ----------
+    pose : array_like, shape (..., 3)
+        Laser pose (x, y, phi) (m, m, rad).
+    z : array_like, shape (..., 2)
+        Measurement (range, bearing) (m, rad), range > 0; broadcast with ``pose``.
+
+    Returns
+    -------
+    landmark : ndarray, shape (..., 2)
+        Landmark position in the world, m.
+    J_pose : ndarray, shape (..., 2, 3)
+        d landmark / d pose.
+    J_z : ndarray, shape (..., 2, 2)
+        d landmark / d z.
+
+    Raises
+    ------
+    TypeError
+        If an input is not numeric.
+    ValueError
+        For a range <= 0, a wrong last dimension, non-finite values or shapes that do
+        not broadcast.
     """
     pose = _checks.array("pose", pose, (3,))
     z = _checks.array("z", z, (2,))
@@ -150,9 +193,31 @@ def landmark_from_two_points(p_right, p_left):
 
         i = -(x_l cos(theta) + y_l sin(theta)),   j = x_l sin(theta) - y_l cos(theta).
 
-    p_right, p_left (..., 2). Returns (frame (..., 3) = (i, j, theta),
-    J_right (..., 3, 2), J_left (..., 3, 2)). Raises ValueError if the points
-    coincide (theta undefined). See ``annslam_lib.paper`` for what was printed.
+    See ``annslam_lib.paper`` for what was printed.
+
+    Parameters
+    ----------
+    p_right : array_like, shape (..., 2)
+        The right point in the robot frame, m.
+    p_left : array_like, shape (..., 2)
+        The left point in the robot frame, m.
+
+    Returns
+    -------
+    frame : ndarray, shape (..., 3)
+        (i, j, theta) (m, m, rad), theta in (-pi, pi].
+    J_right : ndarray, shape (..., 3, 2)
+        d frame / d p_right.
+    J_left : ndarray, shape (..., 3, 2)
+        d frame / d p_left.
+
+    Raises
+    ------
+    TypeError
+        If an input is not numeric.
+    ValueError
+        If the points coincide (theta undefined), a last dimension is not 2 or a value
+        is not finite.
     """
     pr = _checks.array("p_right", p_right, (2,))
     pl = _checks.array("p_left", p_left, (2,))
@@ -177,7 +242,25 @@ def landmark_from_two_points(p_right, p_left):
 
 def two_point_transform(p_right, p_left) -> np.ndarray:
     """The homogeneous 2-D transform ijT_r (..., 3, 3) of section 3.3, corrected:
-    landmark-frame coordinates = ijT_r @ (robot-frame x, y, 1)."""
+    landmark-frame coordinates = ijT_r @ (robot-frame x, y, 1).
+
+    Parameters
+    ----------
+    p_right : array_like, shape (..., 2)
+        The right point in the robot frame, m.
+    p_left : array_like, shape (..., 2)
+        The left point in the robot frame, m.
+
+    Returns
+    -------
+    ndarray, shape (..., 3, 3)
+        [[R(theta)^T, (i, j)], [0, 1]] of :func:`landmark_from_two_points`' frame.
+
+    Raises
+    ------
+    ValueError
+        As :func:`landmark_from_two_points` (the points coincide).
+    """
     frame, _, _ = landmark_from_two_points(p_right, p_left)
     i, j, theta = frame[..., 0], frame[..., 1], frame[..., 2]
     c, s = np.cos(theta), np.sin(theta)

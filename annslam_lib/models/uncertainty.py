@@ -21,9 +21,26 @@ __all__ = ["propagate", "ellipse_points", "ellipse_curves", "monte_carlo", "maha
 def propagate(J, P, R=None) -> np.ndarray:
     """Linearised covariance of y = f(x) + noise: J P J^T (+ R), symmetrised.
 
-    J (m, n) is the Jacobian of f at the mean, P (n, n) the covariance of x,
-    R (m, m) an optional additive noise covariance (e.g. the measurement noise in
-    the innovation covariance S = H P H^T + R, notebook 03).
+    Parameters
+    ----------
+    J : array_like, shape (m, n)
+        The Jacobian of f at the mean.
+    P : array_like, shape (n, n)
+        The covariance of x (symmetric, positive semi-definite).
+    R : array_like, shape (m, m), optional
+        An additive noise covariance (e.g. the measurement noise in the innovation
+        covariance S = H P H^T + R, notebook 03).
+
+    Returns
+    -------
+    ndarray, shape (m, m)
+        J P J^T (+ R), symmetrised.
+
+    Raises
+    ------
+    ValueError
+        If ``J`` is not 2-D, the shapes do not match, or ``P`` or ``R`` is not a
+        covariance.
     """
     J = _checks.array("J", J)
     if J.ndim != 2:
@@ -69,6 +86,36 @@ def monte_carlo(f, mean, cov, n: int = 20000, *, seed: int = 0, angle_outputs=()
     statistics, so a bearing spread across +-pi is not torn in two (the reported
     mean of such a column is wrapped to (-pi, pi] again). The covariance uses the
     unbiased 1/(n - 1) normalisation.
+
+    Parameters
+    ----------
+    f : callable
+        Maps an (n, d) array of inputs to an (n, m) array of outputs.
+    mean : array_like, shape (d,)
+        Mean of the input Gaussian.
+    cov : array_like, shape (d, d)
+        Covariance of the input Gaussian.
+    n : int, optional
+        Number of samples, >= 2.
+    seed : int, optional
+        Seed of the random generator (``numpy.random.default_rng``).
+    angle_outputs : sequence of int, optional
+        Output columns that are angles, rad.
+
+    Returns
+    -------
+    mean : ndarray, shape (m,)
+        Sample mean of the outputs.
+    cov : ndarray, shape (m, m)
+        Sample covariance of the outputs.
+    samples : ndarray, shape (n, m)
+        The outputs, angle columns unwrapped around f(mean).
+
+    Raises
+    ------
+    ValueError
+        If ``mean`` is not 1-D, ``cov`` is not a (d, d) covariance, n < 2, or ``f``
+        does not return an (n, m) array.
     """
     mean = _checks.array("mean", mean)
     if mean.ndim != 1:
@@ -118,7 +165,31 @@ def coverage(x, mean, cov, n_sigma: float = 2.0, *, angle_columns=()) -> float:
 
     For samples that really are N(mean, cov) this tends to
     :func:`expected_coverage` (86.5 % for 2 sigma in 2-D); a linearised
-    covariance that is too small, too large, or centred wrongly gives less."""
+    covariance that is too small, too large, or centred wrongly gives less.
+
+    Parameters
+    ----------
+    x : array_like, shape (n, d)
+        Samples, one per row.
+    mean : array_like, shape (d,)
+        Centre of the ellipsoid.
+    cov : array_like, shape (d, d)
+        Its covariance (non-singular).
+    n_sigma : float, optional
+        Size of the ellipsoid, in standard deviations (Mahalanobis distance).
+    angle_columns : sequence of int, optional
+        Columns that are angles, rad: their differences are wrapped.
+
+    Returns
+    -------
+    float
+        The fraction of rows with squared Mahalanobis distance <= n_sigma^2.
+
+    Raises
+    ------
+    ValueError
+        If the shapes do not match or ``cov`` is singular or not a covariance.
+    """
     return float(np.mean(mahalanobis2(x, mean, cov, angle_columns=angle_columns) <= n_sigma**2))
 
 
@@ -133,7 +204,20 @@ def expected_coverage(n_sigma: float = 2.0, dim: int = 2) -> float:
 def chi2_quantile(p, dof):
     """The chi-square quantile chi2.ppf(p, dof), elementwise. At 2 dof it has the closed
     form -2 ln(1 - p) (the exponential distribution), which the filter's gates use, so
-    that importing the filter does not import ``scipy.stats`` (0.4 s); other dof use it."""
+    that importing the filter does not import ``scipy.stats`` (0.4 s); other dof use it.
+
+    Parameters
+    ----------
+    p : float or array_like
+        Probabilities in [0, 1).
+    dof : int or array_like
+        Degrees of freedom, broadcast with ``p``.
+
+    Returns
+    -------
+    float or ndarray
+        The quantiles: a float for scalar inputs, else an array of the broadcast shape.
+    """
     p_arr, d_arr = np.asarray(p, dtype=float), np.asarray(dof, dtype=float)
     if np.all(d_arr == 2):
         with np.errstate(divide="ignore"):

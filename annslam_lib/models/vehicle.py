@@ -15,10 +15,23 @@ from dataclasses import dataclass
 class Vehicle:
     """Geometry of the car, in metres.
 
-    L: wheelbase (rear axle to front axle).
-    H: lateral distance from the rear-axle centre to the encoder wheel (left).
-    a: longitudinal distance from the rear-axle centre to the laser (forward).
-    b: lateral distance from the rear-axle centre to the laser (left positive).
+    Parameters
+    ----------
+    L : float, optional
+        Wheelbase (rear axle to front axle), m, > 0.
+    H : float, optional
+        Lateral distance from the rear-axle centre to the encoder wheel (left), m.
+    a : float, optional
+        Longitudinal distance from the rear-axle centre to the laser (forward), m.
+    b : float, optional
+        Lateral distance from the rear-axle centre to the laser (left positive), m.
+
+    Raises
+    ------
+    TypeError
+        If a value is not a finite number.
+    ValueError
+        If the wheelbase ``L`` is not positive.
     """
 
     L: float = 2.83

@@ -65,7 +65,7 @@ from ..data import filter_default_names
 from ..data.records import Dataset
 from ..data.simulate import SimConfig, simulate
 from ..evaluation.map import map_errors
-from ..evaluation.summary import METRICS, _traj_rmse, heldout_map_rmse, pose_trace, run_metrics
+from ..evaluation.summary import METRICS, trajectory_rmse, heldout_map_rmse, pose_trace, run_metrics
 from ..perception.beacons import point_features
 from ..perception.sources import with_detections
 from ..slam.config import SlamConfig
@@ -571,7 +571,7 @@ def verdict(st: Study, transfers: dict | None = None, folds: FoldStudy | None = 
 
 def _window_rmse(result, dataset: Dataset, lo: float, hi: float) -> float:
     odo = result.odometry_trajectory
-    return _traj_rmse(odo[(odo[:, 0] >= lo) & (odo[:, 0] <= hi)], dataset.gps)[0]
+    return trajectory_rmse(odo[(odo[:, 0] >= lo) & (odo[:, 0] <= hi)], dataset.gps)[0]
 
 
 def fold_values(result, dataset: Dataset, edges, held_beacons) -> dict:

@@ -253,7 +253,7 @@ def extract_beacons(laser: Laser, config: BeaconConfig = BeaconConfig()) -> Dete
 
 
 
-def _sim_config(dataset: Dataset):
+def simulator_config(dataset: Dataset):
     cfg = dataset.info.get("config") if isinstance(dataset.info, dict) else None
     return cfg if hasattr(cfg, "pole_radius") and hasattr(cfg, "sigma_range") else None
 
@@ -262,7 +262,7 @@ def _sim_config(dataset: Dataset):
 def beacon_config_for(dataset: Dataset) -> BeaconConfig:
     """The default extractor settings for ``dataset``: BeaconConfig() for the real runs;
     for a simulated run, BeaconConfig(pole_radius=<the simulator's pole radius>)."""
-    sim = _sim_config(dataset)
+    sim = simulator_config(dataset)
     return BeaconConfig() if sim is None else BeaconConfig(pole_radius=float(sim.pole_radius))
 
 

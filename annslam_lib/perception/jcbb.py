@@ -120,10 +120,10 @@ def jcbb(z, zhat, C, R, *, gate_prob: float = 0.99, joint_prob: float = 0.99,
     _checks.probability("gate_prob", gate_prob)
     _checks.probability("joint_prob", joint_prob)
     max_nodes = _checks.integer("max_nodes", max_nodes, lo=1)
-    return _search_checked(z, zhat, C, R, float(gate_prob), float(joint_prob), max_nodes)
+    return search_checked(z, zhat, C, R, float(gate_prob), float(joint_prob), max_nodes)
 
 
-def _search_checked(z, zhat, C, R, gate_prob: float, joint_prob: float,
+def search_checked(z, zhat, C, R, gate_prob: float, joint_prob: float,
                    max_nodes: int) -> JcbbResult:
     """:func:`jcbb` on inputs it has checked (float arrays of the right shapes, R a
     covariance, probabilities in (0, 1), max_nodes >= 1): the run loop's call, whose z come

@@ -1,6 +1,6 @@
 """Which detections a run's filter uses (notebooks 04, 05, 08): the dataset's own
 (Victoria Park's trees, the simulator's beacons) or beacons extracted from its raw laser,
-with their measurement noise; and poses from GPS for checking an extractor.
+with their measurement noise.
 """
 from __future__ import annotations
 
@@ -9,12 +9,10 @@ import dataclasses
 import numpy as np
 
 from ..data.records import Dataset, Detections
-from ..models.geometry import wrap_angle
-from .beacons import BeaconConfig, _sim_config, beacon_config_for, extract_beacons
+from .beacons import BeaconConfig, simulator_config, beacon_config_for, extract_beacons
 from .trees import TreeFilter, trees_filter
 
-__all__ = ["SOURCES", "detections_for", "measurement_sigmas", "gps_scan_poses",
-           "with_detections"]
+__all__ = ["SOURCES", "detections_for", "measurement_sigmas", "with_detections"]
 
 #: Accepted values of ``source`` in :func:`detections_for`.
 SOURCES = ("auto", "laser", "detections")
@@ -75,7 +73,7 @@ def measurement_sigmas(dataset: Dataset, source: str = "auto", *,
     if src == "laser":
         cfg = beacon_config_for(dataset) if config is None else config
         return cfg.sigma_range, cfg.sigma_bearing
-    sim = _sim_config(dataset)
+    sim = simulator_config(dataset)
     if sim is not None:
         return float(sim.sigma_range), float(sim.sigma_bearing)
     if dataset.landmark_kind == "trees":
@@ -83,36 +81,6 @@ def measurement_sigmas(dataset: Dataset, source: str = "auto", *,
         return t.sigma_range, t.sigma_bearing
     cfg = BeaconConfig() if config is None else config
     return cfg.sigma_range, cfg.sigma_bearing
-
-
-
-def gps_scan_poses(dataset: Dataset, *, max_heading_gap: float = 0.3) -> tuple[np.ndarray, np.ndarray]:
-    """Reference laser poses at the scan times from GPS alone (notebook 04 "how good
-    are the beacons?"): position = GPS interpolated at the scan time (the antenna is at
-    the laser), heading = ``slam.dead_reckoning.gps_heading`` (GPS track direction corrected
-    for the laser point's side-slip) interpolated at the scan time.
-
-    Returns (poses (S, 3), valid (S,)): valid where the scan lies inside the GPS span and
-    a GPS heading exists within ``max_heading_gap`` seconds (the car moving)."""
-    from ..slam.dead_reckoning import gps_heading
-
-    if not isinstance(dataset, Dataset):
-        raise TypeError(f"dataset must be a records.Dataset, got {type(dataset).__name__}")
-    t, gps = dataset.scan_times, dataset.gps
-    if len(gps) < 3:
-        raise ValueError(f"dataset {dataset.name!r} has {len(gps)} GPS fixes: need at least 3")
-    heading = gps_heading(gps, dataset.odometry, dataset.vehicle)
-    x = np.interp(t, gps.t, gps.east)
-    y = np.interp(t, gps.t, gps.north)
-    if heading.shape[0] == 0:
-        return np.column_stack([x, y, np.zeros_like(t)]), np.zeros(t.size, dtype=bool)
-    ht = heading[:, 0]
-    phi = wrap_angle(np.interp(t, ht, np.unwrap(heading[:, 1])))
-    k = np.searchsorted(ht, t)
-    near = np.minimum(np.abs(t - ht[np.clip(k - 1, 0, ht.size - 1)]),
-                      np.abs(t - ht[np.clip(k, 0, ht.size - 1)]))
-    valid = (near <= max_heading_gap) & (t >= gps.t[0]) & (t <= gps.t[-1])
-    return np.column_stack([x, y, np.atleast_1d(phi)]), valid
 
 
 

@@ -4,7 +4,7 @@
 - ``data``: the runs (maps, scans, the car)
 - ``slam``: Figure 5, landmark zooms, correlations, consistency bands
 - ``ann``: the network's figures (the paper's Figures 6-8)
-- ``paper``: the verdict's figures
+- ``blit``: a widget figure whose steps redraw only what moves
 """
 
-__all__ = ["style", "data", "slam", "ann", "paper"]
+__all__ = ["style", "data", "slam", "ann", "blit"]

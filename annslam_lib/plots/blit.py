@@ -21,7 +21,7 @@ import matplotlib.image
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-from .style import _mathtext_parser
+from .style import mathtext_parser
 
 __all__ = ["Blit", "drawn_by", "log_limits"]
 
@@ -39,7 +39,7 @@ class Blit:
         for a in self.moving:
             a.set_animated(True)
         self.canvas = FigureCanvasAgg(fig)
-        self.canvas.get_renderer().mathtext_parser = _mathtext_parser()
+        self.canvas.get_renderer().mathtext_parser = mathtext_parser()
         self.canvas.draw()                       # layout and the kept picture
         self.fig.set_layout_engine("none")       # the positions stay where they were drawn
         self._background = self.canvas.copy_from_bbox(fig.bbox)

@@ -117,7 +117,7 @@ def layout_signature(fig: Figure) -> tuple:
 
 
 @functools.lru_cache(maxsize=1)
-def _mathtext_parser():
+def mathtext_parser():
     from matplotlib.mathtext import MathTextParser
 
     return MathTextParser("path")            # what the Agg renderer makes for itself
@@ -155,7 +155,7 @@ def render_png(fig: Figure) -> bytes:
     canvas = FigureCanvasAgg(fig)
     # One mathtext parser for every figure: each new renderer makes its own, whose parse
     # cache starts empty, and parsing a log axis's "10^k" labels took a third of a step.
-    canvas.get_renderer().mathtext_parser = _mathtext_parser()
+    canvas.get_renderer().mathtext_parser = mathtext_parser()
     buf = io.BytesIO()
     canvas.print_png(buf)
     if key is not None and kept is None:

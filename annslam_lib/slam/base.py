@@ -17,7 +17,7 @@ from .. import _checks
 from ..models.vehicle import Vehicle
 from .config import MOTION_MODELS
 
-__all__ = ["InnovationError", "check_initial", "check_dt", "check_sigmas", "check_z",
+__all__ = ["InnovationError", "check_measurement", "check_initial", "check_dt", "check_sigmas", "check_z",
            "check_remove", "with_known_landmarks", "FilterBackend", "LandmarkModel"]
 
 
@@ -159,3 +159,16 @@ class LandmarkModel(Protocol):
     sigmas: tuple
 
     def pseudo_measurement(self, pose, z, intensity, width) -> np.ndarray: ...
+
+
+def check_measurement(P, H, R) -> tuple[np.ndarray, np.ndarray]:
+    """H (m, n) and R (m, m) as arrays, checked against P (n, n); ValueError otherwise."""
+    H = _checks.array("H", H)
+    R = _checks.array("R", R)
+    if H.ndim != 2 or H.shape[1] != P.shape[0]:
+        raise ValueError(f"H must be (m, {P.shape[0]}) for a state of size {P.shape[0]}, "
+                         f"got {H.shape}")
+    if R.shape != (H.shape[0], H.shape[0]):
+        raise ValueError(f"R must be {H.shape[0]} x {H.shape[0]} for {H.shape[0]} measurement "
+                         f"rows, got {R.shape}")
+    return H, R

@@ -33,9 +33,10 @@ while a submission runs); ``ANNSLAM_KERNEL=auto`` or unset leaves it on.
 from __future__ import annotations
 
 import math
-import os
 import threading
 import warnings
+
+from .. import _settings
 
 __all__ = ["gate_loop", "gating_kernel", "use_compiled", "unavailable_reason", "MIN_SCANS"]
 
@@ -134,11 +135,7 @@ _lock = threading.Lock()
 def _switched_off() -> bool:
     """``ANNSLAM_KERNEL``: 'numpy' switches the compiled loop off, 'auto' or unset leaves it;
     anything else is refused (a typo must not leave it silently on)."""
-    value = os.environ.get("ANNSLAM_KERNEL", "").strip().lower()
-    if value not in ("", "auto", "numpy"):
-        raise ValueError(f"ANNSLAM_KERNEL must be 'numpy' (the numpy gating only) or 'auto' "
-                         f"(or unset), got {os.environ['ANNSLAM_KERNEL']!r}")
-    return value == "numpy"
+    return _settings.kernel() == "numpy"
 
 
 def gating_kernel():

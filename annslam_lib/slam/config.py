@@ -219,8 +219,26 @@ class SlamConfig:
         tentative landmarks (3 sightings within 2 s), so that a rare 5-sigma bearing
         error, which exceeds the new-landmark threshold, does not leave a duplicate.
         The values live with each dataset (``data.filter_defaults``: the registry for the
-        real runs, ``data.simulate`` for the simulator). Raises ValueError for an unknown
-        name or an unknown field.
+        real runs, ``data.simulate`` for the simulator).
+
+        Parameters
+        ----------
+        name : str
+            'car_park', 'victoria_park' or 'simulated'.
+        **overrides
+            Fields to set instead of the dataset's defaults.
+
+        Returns
+        -------
+        SlamConfig
+            The dataset's defaults with ``overrides``.
+
+        Raises
+        ------
+        TypeError
+            For a field value of the wrong type.
+        ValueError
+            For an unknown name, an unknown field or a field value out of its range.
         """
         base = filter_defaults(name)
         unknown = sorted(set(overrides) - {f.name for f in dataclasses.fields(cls)})

@@ -17,11 +17,11 @@ from .. import _checks
 from ..models import motion as kinematics
 from ..models.geometry import wrap_angle
 from ..models.geometry import interpolate_poses
-from ..data.records import Gps, Odometry
+from ..data.records import Dataset, Gps, Odometry
 from ..models.vehicle import Vehicle
 
 __all__ = ["controls", "dead_reckon", "HeadingFit", "initial_pose_from_gps", "gps_track_heading",
-           "gps_heading"]
+           "gps_heading", "gps_scan_poses"]
 
 
 def _check(odometry, vehicle) -> None:
@@ -39,8 +39,31 @@ def controls(odometry: Odometry, vehicle: Vehicle, *, encoder_correction: bool =
     With ``encoder_correction`` the back-left encoder speed is moved to the rear-axle
     centre, v_c = v_e / (1 - tan(alpha) H / L) (``motion.axle_speed``, section 4.1
     corrected); without it the raw encoder speed is used as v_c (the "what happens
-    if" of notebook 01). Raises ValueError for |alpha| >= pi/2 or a singular
-    correction."""
+    if" of notebook 01).
+
+    Parameters
+    ----------
+    odometry : records.Odometry
+        K samples: times ``t`` (s), encoder ``speed`` (m/s), ``steering`` (rad).
+    vehicle : Vehicle
+        The car (``L``, ``H``, ``a``, ``b``).
+    encoder_correction : bool, optional
+        Move the encoder speed to the rear-axle centre (``motion.axle_speed``); False
+        uses the raw encoder speed as v_c.
+
+    Returns
+    -------
+    ndarray, shape (K, 2)
+        (v_c, alpha) per sample (m/s, rad).
+
+    Raises
+    ------
+    TypeError
+        If ``odometry`` or ``vehicle`` has the wrong type, or ``encoder_correction`` is
+        not a bool.
+    ValueError
+        For no samples, |alpha| >= pi/2 or a singular correction.
+    """
     _check(odometry, vehicle)
     if not isinstance(encoder_correction, bool):
         raise TypeError(f"encoder_correction must be a bool, got {encoder_correction!r}")
@@ -57,15 +80,36 @@ def dead_reckon(odometry: Odometry, pose0, vehicle: Vehicle, *,
     """Laser poses from odometry alone: chained Euler steps of ``motion.predict``
     (section 4.1 corrected; notebook 01 "Dead reckoning").
 
-    pose0 (3,): laser pose (x, y, phi) at ``odometry.t[0]``. Returns (K, 4) rows
-    (t_k, x, y, phi), the pose at each odometry time (see the module's timing
-    convention), heading wrapped to (-pi, pi].
+    Equal to K - 1 chained calls of ``motion.predict`` (to rounding), computed faster: the
+    heading recursion phi_{k+1} = wrap(phi_k + dt_k v_k tan(alpha_k) / L) runs as a scalar
+    loop, then every position increment dt_k * laser_velocity(phi_k, u_k) is evaluated at
+    once and summed with ``np.cumsum`` (the same sequence of additions as the chain).
 
-    Equal to K - 1 chained calls of ``motion.predict`` (to rounding, see
-    tests/test_dead_reckoning.py), computed faster: the heading recursion
-    phi_{k+1} = wrap(phi_k + dt_k v_k tan(alpha_k) / L) runs as a scalar loop, then
-    every position increment dt_k * laser_velocity(phi_k, u_k) is evaluated at once
-    and summed with ``np.cumsum`` (the same sequence of additions as the chain).
+    Parameters
+    ----------
+    odometry : records.Odometry
+        K samples: times ``t`` (s), encoder ``speed`` (m/s), ``steering`` (rad).
+    pose0 : array_like, shape (3,)
+        Laser pose (x, y, phi) (m, m, rad) at ``odometry.t[0]``.
+    vehicle : Vehicle
+        The car (``L``, ``H``, ``a``, ``b``).
+    encoder_correction : bool, optional
+        Move the encoder speed to the rear-axle centre (``motion.axle_speed``); False
+        uses the raw encoder speed as v_c.
+
+    Returns
+    -------
+    ndarray, shape (K, 4)
+        Rows (t_k, x, y, phi), the pose at each odometry time (see the module's timing
+        convention), heading wrapped to (-pi, pi].
+
+    Raises
+    ------
+    TypeError
+        If ``odometry`` or ``vehicle`` has the wrong type, or ``pose0`` is not numeric.
+    ValueError
+        For no samples, ``pose0`` not a finite (3,) array, |alpha| >= pi/2 or a
+        singular encoder correction.
     """
     _check(odometry, vehicle)
     p0 = _checks.array("pose0", pose0, (3,))
@@ -101,7 +145,26 @@ def gps_track_heading(gps: Gps, *, distance: float = 2.0) -> float:
     move along the heading (it sits 3.8 m ahead of the rear axle, so it side-slips
     by atan(a tan(alpha) / (L - b tan(alpha)))), and a chord lags the tangent of a
     curved track by half the angle turned. Use :func:`initial_pose_from_gps`.
-    Raises ValueError if the track never gets ``distance`` m from its start.
+
+    Parameters
+    ----------
+    gps : records.Gps
+        GPS fixes: times ``t`` (s) and positions ``xy`` (m) of the laser point.
+    distance : float, optional
+        How far from the first fix the chord reaches, m, > 0.
+
+    Returns
+    -------
+    float
+        The chord's direction, rad, anticlockwise from East.
+
+    Raises
+    ------
+    TypeError
+        If ``gps`` is not a records.Gps.
+    ValueError
+        If ``distance`` is not a positive number, there are fewer than two fixes, or
+        the track never gets ``distance`` m from its start.
     """
     if not isinstance(gps, Gps):
         raise TypeError(f"gps must be an annslam_lib.data.records.Gps, got {type(gps).__name__}")
@@ -175,14 +238,48 @@ def initial_pose_from_gps(odometry: Odometry, gps: Gps, vehicle: Vehicle, *,
     a receiver's ordinary scatter stays in), is left out;
     the fit is repeated until no fix changes side. The pivot is then the first fix KEPT, so
     a wrong first fix is not trusted as the start. With clean fixes nothing is left out and
-    the result is the plain fit above. Raises ValueError if the fit's RMS residual over the
-    fixes kept exceeds ``max_rms`` m (the dead-reckoned start does not match GPS: a wrong
-    vehicle model, a clock offset or a receiver that is off), or if fewer than half of the
-    window's fixes (or fewer than 3) are kept.
+    the result is the plain fit above.
 
-    Raises ValueError if no fix lies in the odometry's span, or if the fixes of the
-    window never get ``min_travel`` m from the first one (a standing car shows no
-    heading).
+    Parameters
+    ----------
+    odometry : records.Odometry
+        K samples: times ``t`` (s), encoder ``speed`` (m/s), ``steering`` (rad).
+    gps : records.Gps
+        GPS fixes: times ``t`` (s) and positions ``xy`` (m) of the laser point.
+    vehicle : Vehicle
+        The car (``L``, ``H``, ``a``, ``b``).
+    window : float, optional
+        Span of the fit after the first fix, s.
+    min_travel : float, optional
+        Distance the window's fixes must reach from the first one, m.
+    fit_position : bool, optional
+        Fit about the centroids (position and heading free) instead of pivoting about
+        the first fix kept.
+    encoder_correction : bool, optional
+        Move the encoder speed to the rear-axle centre (``motion.axle_speed``); False
+        uses the raw encoder speed as v_c.
+    outlier_floor : float, optional
+        Smallest residual that can make a fix an outlier, m.
+    max_rms : float, optional
+        Largest RMS residual of the fit accepted, m.
+
+    Returns
+    -------
+    HeadingFit
+        The pose (3,) at ``odometry.t[0]`` with the fit's fixes, window, travel, RMS
+        residual and rejected fixes.
+
+    Raises
+    ------
+    TypeError
+        If ``odometry``, ``gps`` or ``vehicle`` has the wrong type.
+    ValueError
+        If no fix lies in the odometry's span; if the fixes of the window never get
+        ``min_travel`` m from the first one (a standing car shows no heading); if the
+        fit's RMS residual over the fixes kept exceeds ``max_rms`` m (the dead-reckoned
+        start does not match GPS: a wrong vehicle model, a clock offset or a receiver
+        that is off); if fewer than half of the window's fixes (or fewer than 3) are
+        kept; or for a setting that is not a positive finite number.
     """
     _check(odometry, vehicle)
     if not isinstance(gps, Gps):
@@ -254,9 +351,35 @@ def gps_heading(gps: Gps, odometry: Odometry, vehicle: Vehicle, *, min_speed: fl
     sample held at fix i. Independent of the dead-reckoned heading, it uses the
     speed only for its sign.
 
-    Returns (M, 2) rows (t, phi) for the interior fixes inside the odometry's span
-    whose neighbours are at most ``max_gap`` s apart and where both the GPS speed
-    and |v_c| are at least ``min_speed`` m/s (a standing car has no track direction).
+    Parameters
+    ----------
+    gps : records.Gps
+        GPS fixes: times ``t`` (s) and positions ``xy`` (m) of the laser point.
+    odometry : records.Odometry
+        K samples: times ``t`` (s), encoder ``speed`` (m/s), ``steering`` (rad).
+    vehicle : Vehicle
+        The car (``L``, ``H``, ``a``, ``b``).
+    min_speed : float, optional
+        Smallest GPS speed and |v_c| used, m/s (a standing car has no track direction).
+    max_gap : float, optional
+        Largest time between a fix and each of its neighbours, s.
+    encoder_correction : bool, optional
+        Move the encoder speed to the rear-axle centre (``motion.axle_speed``); False
+        uses the raw encoder speed as v_c.
+
+    Returns
+    -------
+    ndarray, shape (M, 2)
+        Rows (t, phi) (s, rad) for the interior fixes inside the odometry's span whose
+        neighbours are at most ``max_gap`` s apart and where both the GPS speed and
+        |v_c| are at least ``min_speed`` m/s.
+
+    Raises
+    ------
+    TypeError
+        If ``gps``, ``odometry`` or ``vehicle`` has the wrong type.
+    ValueError
+        If ``min_speed`` or ``max_gap`` is not a positive finite number.
     """
     _check(odometry, vehicle)
     if not isinstance(gps, Gps):
@@ -279,3 +402,50 @@ def gps_heading(gps: Gps, odometry: Odometry, vehicle: Vehicle, *, min_speed: fl
     beta = np.arctan2(lv[:, 1], lv[:, 0])
     phi = wrap_angle(np.arctan2(vel[ok, 1], vel[ok, 0]) - beta)
     return np.column_stack([t[ok], np.atleast_1d(phi)])
+
+
+def gps_scan_poses(dataset: Dataset, *, max_heading_gap: float = 0.3) -> tuple[np.ndarray, np.ndarray]:
+    """Reference laser poses at the scan times from GPS alone (notebook 04 "how good
+    are the beacons?"): position = GPS interpolated at the scan time (the antenna is at
+    the laser), heading = :func:`gps_heading` (GPS track direction corrected
+    for the laser point's side-slip) interpolated at the scan time.
+
+    Parameters
+    ----------
+    dataset : records.Dataset
+        A run with its scan times, GPS, odometry and vehicle.
+    max_heading_gap : float, optional
+        Largest time from a scan to a GPS heading, s.
+
+    Returns
+    -------
+    poses : ndarray, shape (S, 3)
+        (x, y, phi) (m, m, rad) at the S scan times.
+    valid : ndarray of bool, shape (S,)
+        True where the scan lies inside the GPS span and a GPS heading exists within
+        ``max_heading_gap`` seconds (the car moving).
+
+    Raises
+    ------
+    TypeError
+        If ``dataset`` is not a records.Dataset.
+    ValueError
+        If the dataset has fewer than 3 GPS fixes.
+    """
+    if not isinstance(dataset, Dataset):
+        raise TypeError(f"dataset must be a records.Dataset, got {type(dataset).__name__}")
+    t, gps = dataset.scan_times, dataset.gps
+    if len(gps) < 3:
+        raise ValueError(f"dataset {dataset.name!r} has {len(gps)} GPS fixes: need at least 3")
+    heading = gps_heading(gps, dataset.odometry, dataset.vehicle)
+    x = np.interp(t, gps.t, gps.east)
+    y = np.interp(t, gps.t, gps.north)
+    if heading.shape[0] == 0:
+        return np.column_stack([x, y, np.zeros_like(t)]), np.zeros(t.size, dtype=bool)
+    ht = heading[:, 0]
+    phi = wrap_angle(np.interp(t, ht, np.unwrap(heading[:, 1])))
+    k = np.searchsorted(ht, t)
+    near = np.minimum(np.abs(t - ht[np.clip(k - 1, 0, ht.size - 1)]),
+                      np.abs(t - ht[np.clip(k, 0, ht.size - 1)]))
+    valid = (near <= max_heading_gap) & (t >= gps.t[0]) & (t <= gps.t[-1])
+    return np.column_stack([x, y, np.atleast_1d(phi)]), valid

@@ -16,7 +16,8 @@ Every step costs O(n^2) to O(n^3): fine for tens of landmarks, hopeless for hund
 
 The single steps are also plain functions of (x, P), the references of notebook 05's graded
 exercises (``grading.ekf``): :func:`augment_landmark` (section 1, landmark augmentation),
-:func:`innovation`, :func:`kalman_gain`, :func:`joseph_covariance` and
+:func:`innovation`, :func:`kalman_gain`, :func:`joseph_covariance` (the general Kalman
+filter's, ``slam.kalman``) and
 :func:`joseph_update` / :func:`range_bearing_update` (section 3, the update).
 """
 from __future__ import annotations
@@ -25,19 +26,40 @@ import numpy as np
 
 from .. import _checks
 from ..models import motion as kinematics
-from .base import (InnovationError, with_known_landmarks, check_dt, check_initial, check_remove, check_sigmas,
+from .base import (check_measurement, with_known_landmarks, check_dt, check_initial, check_remove, check_sigmas,
                    check_z)
 from ..models.geometry import wrap_angle
 from ..models.observation import inverse_observe, observe
 from ..models.vehicle import Vehicle
 from ..perception.association import mahalanobis_fast
+from .kalman import joseph_covariance, kalman_gain
 
 __all__ = ["DenseEkfSlam", "augment_landmark", "innovation", "kalman_gain", "joseph_covariance",
            "joseph_update", "range_bearing_update"]
 
 
 class DenseEkfSlam:
-    """Dense reference EKF-SLAM: x (n,), P (n, n). See the module docstring."""
+    """Dense reference EKF-SLAM: x (n,), P (n, n). See the module docstring.
+
+    Parameters
+    ----------
+    x0 : array_like, shape (3,)
+        Initial laser pose (x, y, phi) (m, m, rad); the map starts empty.
+    P0 : array_like, shape (3, 3)
+        Its covariance (m^2, rad^2).
+    vehicle : Vehicle
+        The car (``L``, ``a``, ``b``) of the motion model.
+    motion_model : {'euler', 'midpoint'}, optional
+        The prediction's discretisation (``SlamConfig.motion_model``).
+
+    Raises
+    ------
+    TypeError
+        If ``x0`` or ``P0`` is not numeric or ``vehicle`` is not a Vehicle.
+    ValueError
+        If ``x0`` is not a finite (3,) array, ``P0`` not a finite symmetric positive
+        semi-definite (3, 3) matrix, or ``motion_model`` is unknown.
+    """
 
     def __init__(self, x0, P0, vehicle: Vehicle, motion_model: str = "euler") -> None:
         x0, P0 = check_initial(x0, P0, vehicle, motion_model)
@@ -230,18 +252,6 @@ def _state(x, P) -> tuple[np.ndarray, np.ndarray]:
     return x, P
 
 
-def _measurement(P, H, R) -> tuple[np.ndarray, np.ndarray]:
-    H = _checks.array("H", H)
-    R = _checks.array("R", R)
-    if H.ndim != 2 or H.shape[1] != P.shape[0]:
-        raise ValueError(f"H must be (m, {P.shape[0]}) for a state of size {P.shape[0]}, "
-                         f"got {H.shape}")
-    if R.shape != (H.shape[0], H.shape[0]):
-        raise ValueError(f"R must be {H.shape[0]} x {H.shape[0]} for {H.shape[0]} measurement "
-                         f"rows, got {R.shape}")
-    return H, R
-
-
 def augment_landmark(x, P, z, R):
     """Landmark augmentation (notebook 05 section 1): the state and covariance with the
     landmarks seen at measurements ``z`` appended.
@@ -286,46 +296,13 @@ def innovation(z, z_hat) -> np.ndarray:
     return nu
 
 
-def kalman_gain(P, H, R) -> tuple[np.ndarray, np.ndarray]:
-    """Optimal gain K = P H^T S^-1 and innovation covariance S = H P H^T + R (notebook 05
-    section 3). Raises :class:`slam.base.InnovationError` (a ValueError) if S is singular
-    or not positive definite (smallest eigenvalue <= 1e-12 of its largest): no gain
-    exists, e.g. a perfectly known state measured without noise."""
-    P = _checks.array("P", P)
-    H, R = _measurement(P, H, R)
-    S = H @ P @ H.T + R
-    w = np.linalg.eigvalsh(0.5 * (S + S.T))
-    if not w[0] > 1e-12 * max(abs(w[-1]), 1e-300):
-        raise InnovationError(f"the innovation covariance S = H P H^T + R is singular or not "
-                              f"positive definite (eigenvalues {w[0]:.3g} .. {w[-1]:.3g}): "
-                              f"no Kalman gain exists")
-    return P @ H.T @ np.linalg.inv(S), S
-
-
-def joseph_covariance(P, H, R, K) -> np.ndarray:
-    """Joseph form of the covariance update, P+ = (I - K H) P (I - K H)^T + K R K^T
-    (notebook 05 section 3): the covariance of x + K (z - H x) for ANY gain K, symmetric
-    and positive semi-definite by construction. The short forms (I - K H) P and
-    P - K S K^T equal it only for the optimal gain of :func:`kalman_gain`."""
-    P = _checks.array("P", P)
-    if P.ndim != 2 or P.shape[0] != P.shape[1]:
-        raise ValueError(f"P must be square, got {P.shape}")
-    H, R = _measurement(P, H, R)
-    K = _checks.array("K", K)
-    if K.shape != H.T.shape:
-        raise ValueError(f"K must be {H.shape[1]} x {H.shape[0]} (state x measurement), "
-                         f"got {K.shape}")
-    IKH = np.eye(P.shape[0]) - K @ H
-    return IKH @ P @ IKH.T + K @ R @ K.T
-
-
 def joseph_update(x, P, nu, H, R) -> tuple[np.ndarray, np.ndarray]:
     """EKF update with the innovation ``nu`` (notebook 05 section 3): K from
     :func:`kalman_gain`, x+ = x + K nu (heading wrapped to (-pi, pi]), P+ from
     :func:`joseph_covariance`. The arithmetic of :meth:`DenseEkfSlam.update`.
     Raises InnovationError for a singular S."""
     x, P = _state(x, P)
-    H, R = _measurement(P, H, R)
+    H, R = check_measurement(P, H, R)
     nu = _checks.array("nu", nu).ravel()
     if nu.size != H.shape[0]:
         raise ValueError(f"nu has {nu.size} entries but H has {H.shape[0]} rows")
@@ -338,6 +315,35 @@ def joseph_update(x, P, nu, H, R) -> tuple[np.ndarray, np.ndarray]:
 def range_bearing_update(x, P, z, z_hat, H, R) -> tuple[np.ndarray, np.ndarray]:
     """EKF update from stacked (range, bearing) measurements ``z`` and their predictions
     ``z_hat`` (notebook 05 section 3, graded exercise): :func:`joseph_update` with the
-    wrapped :func:`innovation`. x (n,), P (n, n), z and z_hat (2m,), H (2m, n), R (2m, 2m).
-    Returns (x+, P+); raises InnovationError (a ValueError) for a singular S."""
+    wrapped :func:`innovation`.
+
+    Parameters
+    ----------
+    x : array_like, shape (n,)
+        State (x, y, phi, x_1, y_1, ...), n = 3 + 2N.
+    P : array_like, shape (n, n)
+        Its covariance.
+    z : array_like, shape (2m,) or (m, 2)
+        Measured (range, bearing) pairs (m, rad).
+    z_hat : array_like, shape (2m,) or (m, 2)
+        Their predictions.
+    H : array_like, shape (2m, n)
+        Measurement Jacobian.
+    R : array_like, shape (2m, 2m)
+        Measurement noise covariance.
+
+    Returns
+    -------
+    x_new : ndarray, shape (n,)
+        Updated state, heading wrapped to (-pi, pi].
+    P_new : ndarray, shape (n, n)
+        Updated covariance (Joseph form).
+
+    Raises
+    ------
+    InnovationError
+        (a ValueError) For a singular S.
+    ValueError
+        If the shapes do not match or a value is not finite.
+    """
     return joseph_update(x, P, innovation(z, z_hat), H, R)

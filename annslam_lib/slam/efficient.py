@@ -106,16 +106,39 @@ def _load_linalg() -> None:
 class EkfSlam:
     """The efficient EKF-SLAM state (x, P) and its operations (module docstring).
 
-    x0 (3,): initial laser pose; P0 (3, 3): its covariance (symmetric, PSD, finite);
-    motion_model: 'euler' or 'midpoint' (:class:`SlamConfig`); fej: first-estimates
-    Jacobians (module docstring); gating: 'numpy' (:meth:`innovation_d2` as derived) or
-    'compiled' (the same as one numba-compiled loop, ``slam.compiled``: what
-    ``runner.run`` chooses for long runs; a RuntimeError if it is not available).
     ``slam.dense.DenseEkfSlam`` has the same interface with textbook dense algebra.
     Read the state through :meth:`state` (or ``pose``, ``pose_cov``,
     :meth:`landmark_covs`): between calls the vehicle block lives in Python floats, the
     cross covariance may await its compounded prediction, and ``self.P`` holds only
     its upper triangle up to date.
+
+    Parameters
+    ----------
+    x0 : array_like, shape (3,)
+        Initial laser pose (x, y, phi) (m, m, rad); the map starts empty.
+    P0 : array_like, shape (3, 3)
+        Its covariance (symmetric, PSD, finite).
+    vehicle : Vehicle
+        The car (``L``, ``a``, ``b``) of the motion model.
+    motion_model : {'euler', 'midpoint'}, optional
+        The prediction's discretisation (:class:`SlamConfig`).
+    fej : bool, optional
+        First-estimates Jacobians (module docstring).
+    gating : {'numpy', 'compiled'}, optional
+        'numpy' (:meth:`innovation_d2` as derived) or 'compiled' (the same as one
+        numba-compiled loop, ``slam.compiled``: what ``runner.run`` chooses for long
+        runs).
+
+    Raises
+    ------
+    TypeError
+        If ``x0`` or ``P0`` is not numeric, ``vehicle`` is not a Vehicle or ``fej`` is
+        not a bool.
+    ValueError
+        If ``x0`` is not a finite (3,) array, ``P0`` not a finite symmetric positive
+        semi-definite (3, 3) matrix, or ``motion_model`` or ``gating`` is unknown.
+    RuntimeError
+        For ``gating='compiled'`` when the compiled loop is not available.
     """
 
     def __init__(self, x0, P0, vehicle: Vehicle, motion_model: str = "euler", *,

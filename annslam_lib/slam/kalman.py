@@ -1,9 +1,9 @@
 """The Kalman filter in its general form (chapter 01a, "The Kalman filter").
 
 The 1-D filter (:func:`predict_1d`, :func:`update_1d`), the n-D linear filter
-(:func:`kf_predict`, :func:`kf_update`, whose gain and Joseph covariance are
-:func:`dense.kalman_gain` and :func:`dense.joseph_covariance`, the same functions EKF-SLAM
-uses), the chi-square gate of one innovation (:func:`innovation_gate`), the stationary
+(:func:`kf_predict`, :func:`kf_update`, with the gain :func:`kalman_gain` and the Joseph
+covariance :func:`joseph_covariance`, the same functions every filter of the course uses,
+EKF-SLAM included), the chi-square gate of one innovation (:func:`innovation_gate`), the stationary
 variance of a 1-D random walk (:func:`steady_state_variance`), and the Bayes filter on a
 grid (:func:`grid_predict`, :func:`grid_update`, :func:`grid_moments`), which makes no
 Gaussian assumption and is the independent reference the chapter checks the closed forms
@@ -15,14 +15,92 @@ import math
 from typing import Callable
 
 import numpy as np
-from scipy.stats import chi2
 
 from .. import _checks
-from .dense import joseph_covariance, kalman_gain
+from .base import InnovationError, check_measurement
 
-__all__ = ["predict_1d", "update_1d", "kf_predict", "kf_update", "innovation_gate",
-           "steady_state_variance", "grid_predict", "grid_update", "grid_moments",
-           "gaussian_pdf"]
+__all__ = ["predict_1d", "update_1d", "kf_predict", "kf_update", "kalman_gain",
+           "joseph_covariance", "innovation_gate", "steady_state_variance", "grid_predict",
+           "grid_update", "grid_moments", "gaussian_pdf"]
+
+
+def kalman_gain(P, H, R) -> tuple[np.ndarray, np.ndarray]:
+    """Optimal gain K = P H^T S^-1 and innovation covariance S = H P H^T + R (notebook 05
+    section 3).
+
+    Parameters
+    ----------
+    P : array_like, shape (n, n)
+        State covariance.
+    H : array_like, shape (m, n)
+        Measurement Jacobian.
+    R : array_like, shape (m, m)
+        Measurement noise covariance.
+
+    Returns
+    -------
+    K : ndarray, shape (n, m)
+        The gain.
+    S : ndarray, shape (m, m)
+        The innovation covariance.
+
+    Raises
+    ------
+    slam.base.InnovationError
+        (a ValueError) If S is singular or not positive definite (smallest eigenvalue
+        <= 1e-12 of its largest): no gain exists, e.g. a perfectly known state measured
+        without noise.
+    ValueError
+        If the shapes do not match or a value is not finite.
+    """
+    P = _checks.array("P", P)
+    H, R = check_measurement(P, H, R)
+    S = H @ P @ H.T + R
+    w = np.linalg.eigvalsh(0.5 * (S + S.T))
+    if not w[0] > 1e-12 * max(abs(w[-1]), 1e-300):
+        raise InnovationError(f"the innovation covariance S = H P H^T + R is singular or not "
+                              f"positive definite (eigenvalues {w[0]:.3g} .. {w[-1]:.3g}): "
+                              f"no Kalman gain exists")
+    return P @ H.T @ np.linalg.inv(S), S
+
+
+def joseph_covariance(P, H, R, K) -> np.ndarray:
+    """Joseph form of the covariance update, P+ = (I - K H) P (I - K H)^T + K R K^T
+    (notebook 05 section 3): the covariance of x + K (z - H x) for ANY gain K, symmetric
+    and positive semi-definite by construction. The short forms (I - K H) P and
+    P - K S K^T equal it only for the optimal gain of :func:`kalman_gain`.
+
+    Parameters
+    ----------
+    P : array_like, shape (n, n)
+        Prior covariance.
+    H : array_like, shape (m, n)
+        Measurement Jacobian.
+    R : array_like, shape (m, m)
+        Measurement noise covariance.
+    K : array_like, shape (n, m)
+        The gain used, optimal or not.
+
+    Returns
+    -------
+    ndarray, shape (n, n)
+        P+.
+
+    Raises
+    ------
+    ValueError
+        If ``P`` is not square, the shapes do not match or a value is not finite.
+    """
+    P = _checks.array("P", P)
+    if P.ndim != 2 or P.shape[0] != P.shape[1]:
+        raise ValueError(f"P must be square, got {P.shape}")
+    H, R = check_measurement(P, H, R)
+    K = _checks.array("K", K)
+    if K.shape != H.T.shape:
+        raise ValueError(f"K must be {H.shape[1]} x {H.shape[0]} (state x measurement), "
+                         f"got {K.shape}")
+    IKH = np.eye(P.shape[0]) - K @ H
+    return IKH @ P @ IKH.T + K @ R @ K.T
 
 
 def _variance(name: str, v) -> float:
@@ -102,6 +180,8 @@ def innovation_gate(nu, S, p) -> tuple[float, float, bool]:
         raise ValueError(f"S is not positive definite (eigenvalues {w[0]:.3g} .. "
                          f"{w[-1]:.3g}): no Mahalanobis distance")
     d2 = float(nu @ np.linalg.solve(S, nu))
+    from scipy.stats import chi2          # scipy.stats loads only when a gate is asked for
+
     threshold = float(chi2.ppf(p, nu.size))
     return d2, threshold, d2 <= threshold
 
@@ -113,7 +193,25 @@ def steady_state_variance(q, r) -> tuple[float, float]:
 
         p- = (q + sqrt(q^2 + 4 q r)) / 2,   p+ = p- - q = p- r / (p- + r).
 
-    Returns (p-, p+). ValueError for a negative variance or q = 0 with r = 0."""
+    Parameters
+    ----------
+    q : float
+        Process noise variance per step, >= 0.
+    r : float
+        Measurement noise variance, >= 0.
+
+    Returns
+    -------
+    p_minus : float
+        Stationary variance after the prediction, p-.
+    p_plus : float
+        Stationary variance after the update, p+.
+
+    Raises
+    ------
+    ValueError
+        For a negative variance or q = 0 with r = 0.
+    """
     q, r = _variance("q", q), _variance("r", r)
     if q == 0.0 and r == 0.0:
         raise ValueError("q = r = 0: nothing moves and nothing is measured; the variance "

@@ -20,7 +20,8 @@ from ..data.records import Dataset
 from ..models.geometry import wrap_angle
 from ..models.observation import observe
 from .config import SlamConfig
-from .dense import innovation, joseph_covariance, kalman_gain
+from .dense import innovation
+from .kalman import joseph_covariance, kalman_gain
 
 __all__ = ["beacon_update", "nis_verdict", "with_beacons", "localise", "VERDICTS"]
 
@@ -37,9 +38,33 @@ def beacon_update(pose, P, z, beacon, R) -> tuple[np.ndarray, np.ndarray, dict]:
         nu = z - zhat (bearing wrapped), S = H P H^T + R, K = P H^T S^-1
         pose+ = pose + K nu (heading wrapped),  P+ = (I - K H) P (I - K H)^T + K R K^T
 
-    Returns (pose+, P+, info) with info = {zhat, nu, S, K, d2 = nu^T S^-1 nu}. Raises
-    ValueError for bad shapes, a beacon at the sensor, or an S that is not positive
-    definite."""
+    Parameters
+    ----------
+    pose : array_like, shape (3,)
+        Laser pose (x, y, phi) (m, m, rad).
+    P : array_like, shape (3, 3)
+        Its covariance.
+    z : array_like, shape (2,)
+        The sighting (range, laser bearing) (m, rad), range > 0.
+    beacon : array_like, shape (2,)
+        The beacon's known position, m.
+    R : array_like, shape (2, 2)
+        Noise covariance of z.
+
+    Returns
+    -------
+    pose_new : ndarray, shape (3,)
+        pose+, heading wrapped to (-pi, pi].
+    P_new : ndarray, shape (3, 3)
+        P+ (Joseph form).
+    info : dict
+        ``zhat`` (2,), ``nu`` (2,), ``S`` (2, 2), ``K`` (3, 2) and ``d2`` = nu^T S^-1 nu.
+
+    Raises
+    ------
+    ValueError
+        For bad shapes, a beacon at the sensor, or an S that is not positive definite.
+    """
     pose = _checks.array("pose", pose, (3,))
     if pose.ndim != 1:
         raise ValueError(f"pose must be one (x, y, phi), got shape {pose.shape}")
@@ -68,7 +93,32 @@ def nis_verdict(nis, dof, p: float = 0.95) -> tuple[str, float, float, float]:
     'too small' (the filter's S is too large: R or Q over-stated), 'consistent' or 'too
     large' (S too small, or wrong associations). Innovations of a real run are correlated
     in time, so the band is then too narrow: a verdict outside it is a prompt to look,
-    not a proof."""
+    not a proof.
+
+    Parameters
+    ----------
+    nis : array_like, shape (U,)
+        The NIS of each update, >= 0.
+    dof : array_like, shape (U,)
+        The degrees of freedom of each (the innovation's size), > 0.
+    p : float, optional
+        Probability of the band, in (0, 1).
+
+    Returns
+    -------
+    verdict : str
+        'too small', 'consistent' or 'too large' (:data:`VERDICTS`).
+    average : float
+        The summed NIS over the summed dof.
+    lo, hi : float
+        The band of the average.
+
+    Raises
+    ------
+    ValueError
+        For empty or unequal ``nis`` and ``dof``, a negative NIS, dof <= 0 or ``p``
+        outside (0, 1).
+    """
     nis = _checks.array("nis", nis).ravel()
     dof = _checks.array("dof", dof).ravel()
     if nis.size == 0 or nis.shape != dof.shape:
@@ -95,7 +145,28 @@ def with_beacons(dataset: Dataset, beacons) -> Dataset:
 def localise(dataset: Dataset, config: SlamConfig | None = None, **changes):
     """EKF localisation of ``dataset`` on its known map: :func:`runner.run` with
     ``map_mode='known'`` (the dataset's default configuration, or ``config``, with
-    ``changes``). Returns its SlamResult."""
+    ``changes``).
+
+    Parameters
+    ----------
+    dataset : records.Dataset
+        A run with a surveyed map (``dataset.beacons``).
+    config : SlamConfig, optional
+        None: ``SlamConfig.for_dataset(dataset.name)`` for a known name, else
+        ``SlamConfig()``.
+    **changes
+        Fields of :class:`SlamConfig` to change.
+
+    Returns
+    -------
+    SlamResult
+        The run's result (:func:`runner.run`).
+
+    Raises
+    ------
+    ValueError
+        For an unknown field in ``changes`` or a dataset without a surveyed map.
+    """
     from ..data import filter_default_names
     from .runner import run
 

@@ -99,14 +99,14 @@ class SlamResult:
 
 
 
-def _nis_arrays(rows) -> dict:
+def nis_arrays(rows) -> dict:
     names = ("t", "scan", "kind", "nis", "dof", "accepted")
     types = (float, np.int64, np.int8, float, np.int64, bool)
     return {n: np.array([r[i] for r in rows], dtype=ty) for i, (n, ty) in enumerate(zip(names, types))}
 
 
 
-def _landmark_history(log: ObservationLog, M: int):
+def landmark_history(log: ObservationLog, M: int):
     ok = log.landmark >= 0
     lm, scan, tid = log.landmark[ok], log.scan[ok], log.true_id[ok]
     order = np.argsort(lm, kind="stable")

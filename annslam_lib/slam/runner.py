@@ -45,19 +45,20 @@ import numpy as np
 from .._cache import memoize
 from ..data import filter_default_names
 from ..data.records import Dataset, Detections
-from ..data.screening import screen
-from ..evaluation.consistency import chi2_quantile
+from ..data.screening import Screening, screen
+from ..models.uncertainty import chi2_quantile
 from ..models.motion import control_table
 from ..perception.association import NEW, REJECTED, associate_fast
-from ..perception.jcbb import _search_checked
+from ..perception.jcbb import search_checked
 from .base import FilterBackend, LandmarkModel
 from .config import SlamConfig
 from . import compiled, stretches
-from .results import STATUS, ObservationLog, SlamResult, _landmark_history, _nis_arrays
+from .results import STATUS, ObservationLog, SlamResult, landmark_history, nis_arrays
 from .efficient import diag_blocks
 from .threads import one_blas_thread
 
-__all__ = ["run", "run_cached"]
+__all__ = ["run", "run_cached", "prepare", "Prepared", "Events", "event_schedule",
+           "initial_pose", "initial_covariance", "source_detections"]
 
 
 def _resolve_dataset(dataset) -> Dataset:
@@ -74,14 +75,32 @@ def _resolve_dataset(dataset) -> Dataset:
 
 
 
-def _detections(dataset: Dataset, source: str) -> Detections:
+def source_detections(dataset: Dataset, source: str) -> Detections:
+    """The detections the filter would use on ``dataset`` for ``SlamConfig.feature_source``
+    ``source`` (``perception.sources.detections_for``), before any laser calibration."""
     from ..perception import sources          # beacon extraction, only when needed
     return sources.detections_for(dataset, source=source)
 
 
+def initial_pose(dataset: Dataset, config: SlamConfig) -> tuple[np.ndarray, dict]:
+    """The filter's start pose under ``config.initial_pose`` (module docstring, "Initial
+    pose"; chapter 05).
 
-def _initial(dataset: Dataset, cfg: SlamConfig) -> tuple[np.ndarray, dict]:
-    policy = cfg.initial_pose
+    Parameters
+    ----------
+    dataset : records.Dataset
+    config : SlamConfig
+        ``initial_pose``: 'auto' (the truth on a simulated run, else 'gps'), 'truth',
+        'gps' (first fix and the heading fitted over ``initial_window`` seconds) or a pose.
+
+    Returns
+    -------
+    pose : ndarray (3,)
+        (x, y, phi) of the laser.
+    info : dict
+        ``policy`` and, for 'gps', the fit's ``fixes``, ``travel``, ``rms`` and ``window``.
+    """
+    policy = config.initial_pose
     if policy == "auto":
         policy = "truth" if dataset.truth is not None else "gps"
     if policy == "truth":
@@ -93,7 +112,7 @@ def _initial(dataset: Dataset, cfg: SlamConfig) -> tuple[np.ndarray, dict]:
         from .dead_reckoning import initial_pose_from_gps
         try:
             fit = initial_pose_from_gps(dataset.odometry, dataset.gps, dataset.vehicle,
-                                        window=cfg.initial_window)
+                                        window=config.initial_window)
         except ValueError as e:
             raise ValueError(f"initial pose from GPS failed ({e}); pass "
                              "SlamConfig.initial_pose = (x, y, phi)") from e
@@ -102,11 +121,32 @@ def _initial(dataset: Dataset, cfg: SlamConfig) -> tuple[np.ndarray, dict]:
     return np.array(policy, dtype=float), {"policy": "given"}
 
 
+def initial_covariance(config: SlamConfig) -> np.ndarray:
+    """The start pose's covariance, diag(sigma_xy^2, sigma_xy^2, sigma_phi^2) from
+    ``config.initial_sigma_xy`` and ``initial_sigma_phi`` (chapter 05), (3, 3)."""
+    s_xy, s_phi = config.initial_sigma_xy, config.initial_sigma_phi
+    return np.diag([s_xy**2, s_xy**2, s_phi**2])
 
-def _events(odo_t, gps_t, scan_t):
+
+@dataclasses.dataclass(frozen=True)
+class Events:
+    """The GPS fixes and scans of a run in the order the filter meets them (lists, one
+    entry per event): time ``t``, ``code`` (0 a GPS fix, 2 a scan), ``index`` (the fix's
+    or scan's own index) and ``odometry_before`` (how many odometry samples come before
+    it: those earlier, and at equal time those before a scan but after a fix)."""
+    t: list
+    code: list
+    index: list
+    odometry_before: list
+
+    def __iter__(self):
+        return iter((self.t, self.code, self.index, self.odometry_before))
+
+
+def event_schedule(odo_t, gps_t, scan_t) -> Events:
     """The GPS fixes (code 0) and scans (code 2) in time order (ties: GPS first, as in the
-    Car Park file's own event list), and for each the number of odometry samples that come
-    before it: those earlier, and at equal time those before a scan but after a fix."""
+    Car Park file's own event list), with the odometry samples before each
+    (:class:`Events`). The run loop, the factor graph and the capstone share it."""
     t = np.concatenate([gps_t, scan_t])
     code = np.concatenate([np.zeros(gps_t.size, np.int64), np.full(scan_t.size, 2, np.int64)])
     idx = np.concatenate([np.arange(gps_t.size), np.arange(scan_t.size)])
@@ -114,7 +154,64 @@ def _events(odo_t, gps_t, scan_t):
     t, code, idx = t[order], code[order], idx[order]
     k_end = np.where(code == 2, np.searchsorted(odo_t, t, side="right"),
                      np.searchsorted(odo_t, t, side="left"))
-    return t.tolist(), code.tolist(), idx.tolist(), k_end.tolist()
+    return Events(t.tolist(), code.tolist(), idx.tolist(), k_end.tolist())
+
+
+@dataclasses.dataclass(frozen=True)
+class Prepared:
+    """What a run starts from (:func:`prepare`): the screened dataset and what screening
+    repaired, the configuration, the detections (laser calibration applied), the start pose
+    with its covariance and how it was found, and the event schedule."""
+    dataset: Dataset
+    screening: Screening
+    config: SlamConfig
+    detections: Detections
+    pose0: np.ndarray
+    cov0: np.ndarray
+    initial_info: dict
+    events: Events
+
+
+def prepare(dataset, config: SlamConfig | None = None) -> Prepared:
+    """Everything a run needs before its first step (chapter 05; the factor graph of
+    chapter 10 and the capstone start from the same).
+
+    Parameters
+    ----------
+    dataset : records.Dataset or str
+        A loaded or simulated dataset, or 'car_park' / 'victoria_park'.
+    config : SlamConfig, optional
+        None: ``SlamConfig.for_dataset(dataset.name)`` for a known name, else ``SlamConfig()``.
+
+    Returns
+    -------
+    Prepared
+        Damaged streams repaired and counted (``data.screening.screen``), detections of
+        ``config.feature_source`` minus ``range_bias`` and ``bearing_offset``, the start
+        pose (:func:`initial_pose`) and covariance (:func:`initial_covariance`), and the
+        events in time order (:func:`event_schedule`).
+
+    Raises ValueError for a configuration the dataset cannot serve (truth association
+    without true ids, no odometry).
+    """
+    ds, screening = screen(_resolve_dataset(dataset))     # damaged streams: repaired, counted
+    if config is None:
+        config = SlamConfig.for_dataset(ds.name) if ds.name in filter_default_names() else SlamConfig()
+    if not isinstance(config, SlamConfig):
+        raise TypeError(f"config must be a SlamConfig, got {type(config).__name__}")
+    cfg = config
+    det = source_detections(ds, cfg.feature_source)
+    if cfg.range_bias or cfg.bearing_offset:    # a calibration of the laser (SlamConfig)
+        det = dataclasses.replace(det, range=det.range - cfg.range_bias,
+                                  bearing=det.bearing - cfg.bearing_offset)
+    if cfg.association == "truth" and np.any(det.landmark_id < 0):
+        raise ValueError("SlamConfig.association = 'truth' needs detections with true "
+                         "landmark ids (a simulated dataset)")
+    if len(ds.odometry) < 1:
+        raise ValueError("the dataset has no odometry")
+    pose0, info = initial_pose(ds, cfg)
+    return Prepared(ds, screening, cfg, det, pose0, initial_covariance(cfg), info,
+                    event_schedule(ds.odometry.t, ds.gps.t, det.t))
 
 
 def _progress(progress, total):
@@ -132,23 +229,6 @@ def run(dataset, config: SlamConfig | None = None, *, progress=None,
         gating: str = "auto") -> SlamResult:
     """Run EKF-SLAM over a whole dataset (notebook 05; notebook 06 for Victoria Park).
 
-    dataset: a ``records.Dataset`` (loaded or simulated) or 'car_park' / 'victoria_park'.
-    config: :class:`SlamConfig`; None -> ``SlamConfig.for_dataset(dataset.name)`` for a
-    known name, else ``SlamConfig()``. progress: tqdm bar; None = only for long runs
-    with a terminal. backend: 'efficient' (:class:`EkfSlam`) or 'dense' (the textbook
-    reference ``slam.dense.DenseEkfSlam``; slow, for checks). inspect: None, or a function
-    called with the filter once it is built, before any step (an analysis may wrap its
-    methods to record what they see, e.g. ``evaluation.real_consistency``). The loop calls
-    ``innovation_d2``, ``joint_prediction`` (JCBB), ``update``, ``augment``, ``remove``,
-    ``gps_update``, ``health`` and the read access on either backend; to predict,
-    ``predict_stretch`` on the efficient one (``slam.stretches``: the odometry between two
-    events compounded beforehand) and ``predict`` step by step on the dense one.
-    gating (efficient backend): 'numpy' (``EkfSlam.innovation_d2`` as chapter 05 derives
-    it), 'compiled' (the same formulas as one compiled loop, ``slam.compiled``; an error
-    if numba is missing) or 'auto' (compiled for runs of at least
-    ``slam.compiled.MIN_SCANS`` scans when available, else numpy); ``result.gating`` says
-    which ran.
-
     Events are processed in time order from the first odometry sample on (earlier scans
     and fixes are skipped and counted); the filter predicts to every event's time with
     the control of the last odometry sample. A scan: predict, gate and associate all its
@@ -156,11 +236,54 @@ def run(dataset, config: SlamConfig | None = None, *, progress=None,
     landmarks, then the tentative-landmark rule. BLAS runs on one thread meanwhile
     (:func:`one_blas_thread`).
 
-    landmark_model: with ``config.landmark_model = 'ann'``, the trained model
-    (``ann.TrainedModel``, ``ann.InverseModel`` or anything with ``pseudo_measurement(pose,
-    z, intensity, width)`` and ``sigmas``): its pseudo-measurements replace the detections
-    (module docstring). The log keeps the detections, not the pseudo-measurements (after the
-    configuration's calibration, ``SlamConfig.range_bias`` and ``bearing_offset``, if any).
+    Parameters
+    ----------
+    dataset : records.Dataset or str
+        A loaded or simulated dataset, or 'car_park' / 'victoria_park'.
+    config : SlamConfig, optional
+        None -> ``SlamConfig.for_dataset(dataset.name)`` for a known name, else
+        ``SlamConfig()``.
+    progress : bool or None, optional
+        A tqdm bar; None = only for long runs with a terminal.
+    backend : {'efficient', 'dense'}, optional
+        'efficient' (:class:`EkfSlam`) or 'dense' (the textbook reference
+        ``slam.dense.DenseEkfSlam``; slow, for checks).
+    landmark_model : object, optional
+        With ``config.landmark_model = 'ann'``, the trained model (``ann.TrainedModel``,
+        ``ann.InverseModel`` or anything with ``pseudo_measurement(pose, z, intensity,
+        width)`` and ``sigmas``): its pseudo-measurements replace the detections (module
+        docstring). The log keeps the detections, not the pseudo-measurements (after the
+        configuration's calibration, ``SlamConfig.range_bias`` and ``bearing_offset``,
+        if any).
+    inspect : callable, optional
+        Called with the filter once it is built, before any step (an analysis may wrap
+        its methods to record what they see, e.g. ``evaluation.real_consistency``). The
+        loop calls ``innovation_d2``, ``joint_prediction`` (JCBB), ``update``,
+        ``augment``, ``remove``, ``gps_update``, ``health`` and the read access on either
+        backend; to predict, ``predict_stretch`` on the efficient one (``slam.stretches``:
+        the odometry between two events compounded beforehand) and ``predict`` step by
+        step on the dense one.
+    gating : {'auto', 'numpy', 'compiled'}, optional
+        Efficient backend only: 'numpy' (``EkfSlam.innovation_d2`` as chapter 05 derives
+        it), 'compiled' (the same formulas as one compiled loop, ``slam.compiled``; an
+        error if numba is missing) or 'auto' (compiled for runs of at least
+        ``slam.compiled.MIN_SCANS`` scans when available, else numpy); ``result.gating``
+        says which ran.
+
+    Returns
+    -------
+    SlamResult
+        The trajectory after every scan, the map with its covariances, the NIS of every
+        update, the counts, the covariance health and the per-detection log.
+
+    Raises
+    ------
+    TypeError
+        If ``dataset`` or ``config`` has the wrong type.
+    ValueError
+        For an unknown dataset name, backend or gating, a configuration the dataset or
+        the backend cannot serve, or a landmark model that does not match the
+        configuration.
     """
     if gating not in ("auto", "numpy", "compiled"):
         raise ValueError(f"gating must be 'auto', 'numpy' or 'compiled', got {gating!r}")
@@ -174,7 +297,27 @@ def run_cached(dataset, config: SlamConfig | None = None, *,
     """:func:`run` (no progress bar, no landmark model), computed once per machine and then
     read back from the study cache (``annslam_lib._cache``): for the long runs a notebook
     compares, whose running time is not the lesson. ``result.runtime`` is the time of the
-    run that computed it."""
+    run that computed it.
+
+    Parameters
+    ----------
+    dataset : records.Dataset or str
+        As :func:`run`.
+    config : SlamConfig, optional
+        As :func:`run`.
+    backend : {'efficient', 'dense'}, optional
+        As :func:`run`.
+
+    Returns
+    -------
+    SlamResult
+        The same result as ``run(dataset, config, backend=backend)``.
+
+    Raises
+    ------
+    TypeError, ValueError
+        As :func:`run`.
+    """
     return run(dataset, config, progress=False, backend=backend)
 
 
@@ -374,7 +517,7 @@ class _ScanStep:
         cand = np.flatnonzero((d2 <= self.gate).any(axis=0))
         if cand.size:
             zhat, C = self.filt.joint_prediction(cand)
-            res = _search_checked(z, zhat, C, self.R, self.gate_prob, self.gate_prob,
+            res = search_checked(z, zhat, C, self.R, self.gate_prob, self.gate_prob,
                                   self.max_nodes)
             self.truncated += not res.complete
             paired = res.pairs >= 0
@@ -382,33 +525,25 @@ class _ScanStep:
         return assign.tolist()
 
 
-def _run(dataset, config, progress, backend, landmark_model=None, inspect=None,
-         gating="auto") -> SlamResult:
-    t_start = time.perf_counter()
-    ds, screening = screen(_resolve_dataset(dataset))     # damaged streams: repaired, counted
-    if config is None:
-        config = SlamConfig.for_dataset(ds.name) if ds.name in filter_default_names() else SlamConfig()
-    if not isinstance(config, SlamConfig):
-        raise TypeError(f"config must be a SlamConfig, got {type(config).__name__}")
-    cfg = config
+@dataclasses.dataclass
+class _Record:
+    """What the loop collects for the result, row by row."""
+    counts: dict
+    pose_prior: np.ndarray                         # (scans, 3) prior pose at each scan
+    traj: list = dataclasses.field(default_factory=list)     # (t, x, y, phi) after each scan
+    cov: list = dataclasses.field(default_factory=list)      # its covariance, 6 entries
+    scans: list = dataclasses.field(default_factory=list)    # the scans processed
+    nis: list = dataclasses.field(default_factory=list)      # (t, scan, kind, nis, dof, ok)
+    health: list = dataclasses.field(default_factory=list)   # (scan, t, n, min_eig, asym)
+
+
+def _build(prep: Prepared, backend: str, gating: str, inspect):
+    """The filter and its landmark book at the start pose (the known map added if asked)."""
+    cfg, ds = prep.config, prep.dataset
     if backend == "efficient":
         from .efficient import EkfSlam as make
-    elif backend == "dense":
-        from .dense import DenseEkfSlam as make
     else:
-        raise ValueError(f"backend must be 'efficient' or 'dense', got {backend!r}")
-    det = _detections(ds, cfg.feature_source)
-    if cfg.range_bias or cfg.bearing_offset:    # a calibration of the laser (SlamConfig)
-        det = dataclasses.replace(det, range=det.range - cfg.range_bias,
-                                  bearing=det.bearing - cfg.bearing_offset)
-    if cfg.association == "truth" and np.any(det.landmark_id < 0):
-        raise ValueError("SlamConfig.association = 'truth' needs detections with true "
-                         "landmark ids (a simulated dataset)")
-    odo = ds.odometry
-    if len(odo) < 1:
-        raise ValueError("the dataset has no odometry")
-    pose0, init_info = _initial(ds, cfg)
-    P0 = np.diag([cfg.initial_sigma_xy**2, cfg.initial_sigma_xy**2, cfg.initial_sigma_phi**2])
+        from .dense import DenseEkfSlam as make
     if cfg.association == "jcbb" and backend != "efficient":
         raise ValueError("SlamConfig.association = 'jcbb' is implemented by the efficient "
                          "backend only")
@@ -418,49 +553,69 @@ def _run(dataset, config, progress, backend, landmark_model=None, inspect=None,
     options = {"fej": True} if cfg.first_estimates else {}
     if backend == "efficient":
         if gating == "auto":
-            gating = "compiled" if compiled.use_compiled(len(det)) else "numpy"
+            gating = "compiled" if compiled.use_compiled(len(prep.detections)) else "numpy"
         options["gating"] = gating
     elif gating == "compiled":
         raise ValueError("gating='compiled' is a choice of the efficient backend only")
-    filt = make(pose0, P0, ds.vehicle, cfg.motion_model, **options)
+    filt = make(prep.pose0, prep.cov0, ds.vehicle, cfg.motion_model, **options)
     book = LandmarkBook(cfg.landmark_min_observations, cfg.landmark_probation)
     if cfg.map_mode == "known":                # EKF localisation on the surveyed map
         if ds.beacons is None:
             raise ValueError(f"SlamConfig.map_mode = 'known' needs a surveyed map, and "
                              f"dataset {ds.name!r} has none (Dataset.beacons is None)")
         filt.add_known_landmarks(ds.beacons, cfg.known_map_sigma)
-        book.known(ds.beacons.shape[0], float(odo.t[0]) if len(odo) else 0.0)
+        book.known(ds.beacons.shape[0], float(ds.odometry.t[0]))
     if inspect is not None:
         inspect(filt)
+    return filt, book
+
+
+def _run(dataset, config, progress, backend, landmark_model=None, inspect=None,
+         gating="auto") -> SlamResult:
+    t_start = time.perf_counter()
+    if backend not in ("efficient", "dense"):
+        raise ValueError(f"backend must be 'efficient' or 'dense', got {backend!r}")
+    prep = prepare(dataset, config)
+    filt, book = _build(prep, backend, gating, inspect)
+    cfg, ds, det = prep.config, prep.dataset, prep.detections
+    odo = ds.odometry
     controls = control_table(odo, ds.vehicle, cfg.sigma_speed, cfg.sigma_steer,
                              cfg.steer_noise_gain, array=True)
     lmodel = _landmark_model(cfg, landmark_model)
     sr, sb = cfg.sigma_range, cfg.sigma_bearing
     if lmodel is not None:                     # the model's pseudo-measurement noise R'
         sr, sb = (float(s) for s in lmodel.sigmas)
+    dets = _Detections(det, cfg)
+    scan_step = _ScanStep(filt, book, dets, cfg, lmodel, sr, sb)
+    rec = _Record(counts=dict(predicts=0, scans=0, scans_skipped=0, gps_updates=0,
+                              gps_rejected=0, gps_skipped=0, updates=0, observations=0,
+                              associated=0, new=0, rejected=0, out_of_range=0,
+                              landmarks_created=0, landmarks_removed=0,
+                              **prep.screening.counts()),
+                  pose_prior=np.full((len(det), 3), np.nan))
+    odo_traj, t_end = _loop(prep, filt, controls, scan_step, rec, backend, progress)
+    book.prune(filt, t_end, True)
+    _checkpoint(filt, rec, rec.scans[-1] if rec.scans else -1, t_end)
+    rec.counts["landmarks_removed"] = book.removed
+    if cfg.association == "jcbb":
+        rec.counts["jcbb_truncated"] = scan_step.truncated
+    return _assemble(filt, book, dets, prep, rec, odo_traj, t_start)
+
+
+def _loop(prep: Prepared, filt, controls, scan_step, rec: _Record, backend, progress):
+    """The run's events in time order (numbered as in :func:`run`'s docstring): 1. predict
+    to the event, 2. a GPS fix: its update, 3. a scan: gate, associate, update, add
+    landmarks; 4. after the last event, the remaining odometry. Returns the odometry-only
+    poses at the odometry samples and the time the run ends."""
+    cfg, ds = prep.config, prep.dataset
+    odo, gps_xy = ds.odometry, ds.gps.xy
+    counts, traj_rows, cov_rows = rec.counts, rec.traj, rec.cov
+    scans_done, pose_prior, nis_rows = rec.scans, rec.pose_prior, rec.nis
     gps_gate = math.inf if cfg.gps_gate_prob >= 1.0 else chi2_quantile(cfg.gps_gate_prob, 2)
     t0 = float(odo.t[0])
     gps_until = {"none": -math.inf, "init": t0 + cfg.gps_init_seconds, "all": math.inf}[cfg.gps_mode]
-    gps_xy = ds.gps.xy
 
-    dets = _Detections(det, cfg)
-    scan_step = _ScanStep(filt, book, dets, cfg, lmodel, sr, sb)
-    n_scans = len(det)
-    traj_rows: list[tuple] = []            # pose after each processed scan
-    cov_rows: list[tuple] = []             # its covariance (6 unique entries)
-    scans_done: list[int] = []
-    pose_prior = np.full((n_scans, 3), np.nan)
-    nis_rows = []                          # (t, scan, kind, nis, dof, accepted)
-    health_rows = []
-    counts = dict(predicts=0, scans=0, scans_skipped=0, gps_updates=0, gps_rejected=0,
-                  gps_skipped=0, updates=0, observations=0, associated=0, new=0, rejected=0,
-                  out_of_range=0, landmarks_created=0, landmarks_removed=0, **screening.counts())
-
-    def checkpoint(scan: int, t: float) -> None:
-        lo, asym = filt.health()
-        health_rows.append((scan, t, filt.state()[0].size, lo, asym))
-
-    ev_t, ev_code, ev_idx, ev_k = _events(odo.t, ds.gps.t, det.t)
+    ev_t, ev_code, ev_idx, ev_k = prep.events
     # the predictions between events, compounded for the whole run at once (slam.stretches);
     # the dense reference replays them step by step
     legs = stretches.compound(odo.t, controls, ev_t, ev_k, ds.vehicle,
@@ -486,9 +641,9 @@ def _run(dataset, config, progress, backend, landmark_model=None, inspect=None,
         if not legs.processed[e]:          # before the first odometry sample
             counts["scans_skipped" if code == 2 else "gps_skipped"] += 1
             continue
-        advance(e)
+        advance(e)                         # 1. predict
         cur_t = t
-        if code == 0:                      # GPS fix
+        if code == 0:                      # 2. GPS fix
             if t > gps_until:
                 counts["gps_skipped"] += 1
                 continue
@@ -496,7 +651,7 @@ def _run(dataset, config, progress, backend, landmark_model=None, inspect=None,
             nis_rows.append((t, -1, 1, nis, 2, ok))
             counts["gps_updates" if ok else "gps_rejected"] += 1
             continue
-        counts["scans"] += 1               # laser scan idx
+        counts["scans"] += 1               # 3. laser scan idx
         prior = filt.pose_tuple()
         pose_prior[idx] = prior
         scans_done.append(idx)
@@ -507,31 +662,30 @@ def _run(dataset, config, progress, backend, landmark_model=None, inspect=None,
         traj_rows.append((t, *filt.pose_tuple()))
         cov_rows.append(filt.pose_cov_entries())
         if counts["scans"] % cfg.checkpoint_every == 0:
-            checkpoint(idx, t)
-    advance(len(ev_t))                     # odometry after the last event
+            _checkpoint(filt, rec, idx, t)
+    advance(len(ev_t))                     # 4. odometry after the last event
     cur_t = max(cur_t, float(odo.t[-1]))
     if bar is not None:
         bar.update(bar.total - bar.n)
         bar.close()
-    book.prune(filt, cur_t, True)
-    checkpoint(scans_done[-1] if scans_done else -1, cur_t)
-    counts["landmarks_removed"] = book.removed
-    if cfg.association == "jcbb":
-        counts["jcbb_truncated"] = scan_step.truncated
-    return _assemble(filt, book, dets, cfg, counts, traj_rows, cov_rows, scans_done, pose_prior,
-                     legs.sample_poses(starts), nis_rows, health_rows, pose0, init_info, t_start)
+    return legs.sample_poses(starts), cur_t
 
 
-def _assemble(filt, book, dets, cfg, counts, traj_rows, cov_rows, scans_done, pose_prior,
-              odo_traj, nis_rows, health_rows, pose0, init_info, t_start) -> SlamResult:
+def _checkpoint(filt, rec: _Record, scan: int, t: float) -> None:
+    lo, asym = filt.health()
+    rec.health.append((scan, t, filt.state()[0].size, lo, asym))
+
+
+def _assemble(filt, book, dets, prep: Prepared, rec: _Record, odo_traj, t_start) -> SlamResult:
     """The :class:`SlamResult` of a finished run: arrays from the rows collected, the
     per-detection log, the landmarks' histories."""
+    cfg, counts, pose_prior = prep.config, rec.counts, rec.pose_prior
     det = dets.det
     n_scans = len(det)
-    n_traj = len(traj_rows)
-    traj = np.array(traj_rows, dtype=float).reshape(n_traj, 4)
-    traj_scan = np.array(scans_done, dtype=np.int64)
-    c6 = np.array(cov_rows, dtype=float).reshape(n_traj, 6)
+    n_traj = len(rec.traj)
+    traj = np.array(rec.traj, dtype=float).reshape(n_traj, 4)
+    traj_scan = np.array(rec.scans, dtype=np.int64)
+    c6 = np.array(rec.cov, dtype=float).reshape(n_traj, 6)
     traj_cov = c6[:, [0, 1, 2, 1, 3, 4, 2, 4, 5]].reshape(n_traj, 3, 3)
     processed = np.zeros(det.count, dtype=bool)
     processed[np.isin(np.repeat(np.arange(n_scans), np.diff(det.offsets)), traj_scan)] = True
@@ -556,14 +710,14 @@ def _assemble(filt, book, dets, cfg, counts, traj_rows, cov_rows, scans_done, po
                          diameter=det.diameter[rows].copy(), true_id=det.landmark_id[rows].copy(),
                          status=dets.status[rows], landmark=det_landmark[rows],
                          pose_prior=pose_prior[scan_of[rows]], pose=post[scan_of[rows]])
-    lm_obs, lm_true = _landmark_history(log, M)
-    health = {k: np.array([r[i] for r in health_rows]) for i, k in
+    lm_obs, lm_true = landmark_history(log, M)
+    health = {k: np.array([r[i] for r in rec.health]) for i, k in
               enumerate(("scan", "t", "n", "min_eig", "asymmetry"))}
     return SlamResult(
         trajectory=traj, scan_index=traj_scan, pose_cov=traj_cov,
         odometry_trajectory=odo_traj,
         landmarks=x[3:].reshape(-1, 2).copy(), landmark_cov=diag_blocks(P).copy(),
-        landmark_observations=lm_obs, landmark_true_id=lm_true, nis=_nis_arrays(nis_rows),
+        landmark_observations=lm_obs, landmark_true_id=lm_true, nis=nis_arrays(rec.nis),
         counts=counts, health=health, state=x, covariance=P, observations=log,
-        runtime=time.perf_counter() - t_start, config=cfg, initial_pose=pose0,
-        initial_info=init_info, gating=getattr(filt, "gating", "numpy"))
+        runtime=time.perf_counter() - t_start, config=cfg, initial_pose=prep.pose0,
+        initial_info=prep.initial_info, gating=getattr(filt, "gating", "numpy"))

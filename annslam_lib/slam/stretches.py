@@ -103,7 +103,7 @@ def compound(odo_t, controls, ev_t, ev_k, vehicle: Vehicle, midpoint: bool) -> S
     """The stretches of a run (module docstring): odometry times ``odo_t`` (K,), nondecreasing;
     ``controls`` (K, 9), the rows of ``models.motion.control_table``; the events' times
     ``ev_t`` (E,) in processing order and ``ev_k`` (E,), nondecreasing, the number of
-    samples before each (``runner._events``); ``midpoint`` for the midpoint model.
+    samples before each (``runner.event_schedule``); ``midpoint`` for the midpoint model.
     Raises ValueError for inputs that do not fit together (lengths, order, non-finite
     values, an ``ev_k`` that does not count the samples before its event)."""
     odo_t = np.asarray(odo_t, dtype=float).ravel()
@@ -123,7 +123,7 @@ def compound(odo_t, controls, ev_t, ev_k, vehicle: Vehicle, midpoint: bool) -> S
     before, after = ev_k >= 1, ev_k < K                  # each event between its samples
     if np.any(odo_t[ev_k[before] - 1] > ev_t[before]) or np.any(odo_t[ev_k[after]] < ev_t[after]):
         raise ValueError("compound: ev_k must count the odometry samples before each event "
-                         "(runner._events)")
+                         "(runner.event_schedule)")
     processed = before                                   # a sample precedes it: a control
     pe = np.flatnonzero(processed)
     # The points, in processing order: sample k (key 2k) and processed event e right after

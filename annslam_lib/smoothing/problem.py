@@ -33,7 +33,6 @@ import numpy as np
 
 from .. import _checks
 from ..data.records import Dataset
-from ..data.screening import screen
 from ..models.geometry import wrap_angle
 from ..models.motion import control_table
 from ..slam.config import SlamConfig
@@ -175,19 +174,20 @@ def build_problem(dataset: Dataset, result: SlamResult, *, min_sightings: int = 
         raise ValueError("build_problem needs a SLAM run on the detections (landmark_model "
                          "'inverse', map_mode 'slam'), got landmark_model "
                          f"{cfg.landmark_model!r}, map_mode {cfg.map_mode!r}")
-    from ..slam.runner import _detections, _events     # the run loop's own inputs and order
-    ds, _ = screen(dataset)
+    from ..slam.runner import prepare        # the run loop's own inputs and order
+    prep = prepare(dataset, cfg)
+    ds = prep.dataset
     odo, gps, log = ds.odometry, ds.gps, result.observations
     gps_used = _gps_used(result, gps)
     scans = result.scan_index
     if scans.size == 0:
         raise ValueError("the run processed no scan")
-    det = _detections(ds, cfg.feature_source)
+    det = prep.detections                    # laser calibration applied, as in the run's log
     scan_of = np.repeat(np.arange(len(det)), np.diff(det.offsets))
     rows = np.flatnonzero(np.isin(scan_of, scans))
     if scans.max() >= len(det) or rows.size != len(log) or not (
-            np.array_equal(det.range[rows] - cfg.range_bias, log.range)
-            and np.array_equal(det.bearing[rows] - cfg.bearing_offset, log.bearing)
+            np.array_equal(det.range[rows], log.range)
+            and np.array_equal(det.bearing[rows], log.bearing)
             and np.array_equal(det.t[scans], result.trajectory[:, 0])):
         raise ValueError("the run's detections are not the dataset's: pass the dataset the "
                          "result was computed from")
@@ -203,7 +203,7 @@ def build_problem(dataset: Dataset, result: SlamResult, *, min_sightings: int = 
                              cfg.steer_noise_gain, array=True)
     t0, pose0 = float(odo.t[0]), np.asarray(result.initial_pose, float)
     zero = np.zeros((3, 3))
-    ev_t, ev_code, ev_idx, ev_k = _events(odo.t, gps.t, det_t)
+    ev_t, ev_code, ev_idx, ev_k = prep.events
     # the run loop's predictions between events (slam.stretches), chained from node to node
     legs = stretches.compound(odo.t, controls, ev_t, ev_k, ds.vehicle,
                               cfg.motion_model == "midpoint")
@@ -277,7 +277,7 @@ def build_problem(dataset: Dataset, result: SlamResult, *, min_sightings: int = 
                   landmarks=int(keep.size), landmarks_dropped=int(seen.size - keep.size),
                   observations_dropped=int(used.sum() - rows.size))
     order = np.argsort(gps_used)
-    P0 = np.diag([cfg.initial_sigma_xy**2, cfg.initial_sigma_xy**2, cfg.initial_sigma_phi**2])
+    P0 = prep.cov0
     return GraphProblem(
         t=np.array(nodes_t), kind=np.array(nodes_kind, dtype=np.int8),
         scan=np.array(nodes_scan, dtype=np.int64),

@@ -1,5 +1,14 @@
-"""A class on JupyterHub (``./course.sh hub``): the class list, one Unix account per student,
-the hub's folder and the settings ``hub/jupyterhub_config.py`` applies.
+"""A class on JupyterHub (``./course.sh hub``). Here: the class list, one Unix account per
+student, the hub's folder, each server's environment and each role's Jupyter configuration.
+Its modules:
+
+- ``setup``: the hub folder prepared (students' environment, release, data, the class's
+  studies, proxy) and JupyterHub started (``python -m annslam_lib hub``)
+- ``config``: JupyterHub's settings for the class, what ``hub/jupyterhub_config.py`` applies
+- ``classroom``: the instructor's steps through nbgrader's exchange (release, collect, grade,
+  feedback: ``./course.sh class``)
+- ``client``: a running hub driven over its REST API as an admin service (the hub's tests
+  and load benchmark)
 
 Isolation is the operating system's: the hub runs as root and JupyterHub's default
 ``LocalProcessSpawner`` starts each student's server as that student's own Unix account
@@ -36,13 +45,16 @@ import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
 
+from ... import _settings
+
 __all__ = ["HubError", "HubLayout", "ENV_DIR", "COURSE_ID", "MARK", "read_class",
            "check_name", "account_status", "ensure_account", "give_course", "running_hub",
            "write_role_config", "server_env", "STUDENT_DISABLED", "INSTRUCTOR_DISABLED",
-           "system_python", "reachable_by_others", "open_to_all"]
+           "system_python", "reachable_by_others", "open_to_all",
+           "setup", "config", "classroom", "client"]
 
-ENV_DIR = "ANNSLAM_HUB_DIR"
-DEFAULT_DIR = "/srv/annslam-hub"
+ENV_DIR = _settings.HUB_DIR
+DEFAULT_DIR = _settings.HUB_DIR_DEFAULT
 COURSE_ID = "annslam"
 #: GECOS field of the accounts the course creates: an existing account without it is not
 #: the course's, and a class list naming it (``root``, ``www-data``, a colleague) is refused.
@@ -70,7 +82,7 @@ class HubLayout:
 
     @classmethod
     def from_env(cls) -> "HubLayout":
-        return cls(Path(os.environ.get(ENV_DIR) or DEFAULT_DIR).resolve())
+        return cls((_settings.hub_dir() or Path(DEFAULT_DIR)).resolve())
 
     env = property(lambda self: self.root / "student-env")
     data = property(lambda self: self.root / "data")
@@ -177,9 +189,9 @@ def server_env(layout: HubLayout, role: str) -> dict[str, str]:
     """Environment of a student's or the instructor's server (and so of its kernels)."""
     return {
         "PATH": f"{layout.env / 'bin'}:/usr/local/bin:/usr/bin:/bin",
-        "ANNSLAM_DATA": str(layout.data),
-        # the studies computed once for the class (hub_setup.warm_class_studies), read-only
-        "ANNSLAM_CLASS_CACHE": str(layout.studies),
+        _settings.DATA: str(layout.data),
+        # the studies computed once for the class (setup.warm_class_studies), read-only
+        _settings.CLASS_CACHE: str(layout.studies),
         "JUPYTER_CONFIG_DIR": str(layout.role_config(role)),
         # one BLAS thread per kernel: a class shares the machine's cores
         "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
@@ -230,9 +242,9 @@ def system_python() -> Path:
     """The interpreter of the students' environment: ``ANNSLAM_HUB_PYTHON``, else a
     Python 3.11 that every user can run (a Python under root's home, such as pyenv's, is
     not: students would get ``Permission denied``)."""
-    env = os.environ.get("ANNSLAM_HUB_PYTHON")
-    candidates = [env] if env else ["/usr/bin/python3.11", "/usr/local/bin/python3.11",
-                                    shutil.which("python3.11") or ""]
+    given = _settings.hub_python()
+    candidates = [str(given)] if given else ["/usr/bin/python3.11", "/usr/local/bin/python3.11",
+                                             shutil.which("python3.11") or ""]
     for c in filter(None, candidates):
         p = Path(c)
         if p.is_file() and _world_runnable(p):

@@ -20,7 +20,8 @@ import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .hub import HubError, HubLayout, account_status
+from ... import _settings
+from . import HubError, HubLayout, account_status
 
 __all__ = ["HubClient", "Kernel", "Execution", "RunningHub", "launch", "free_ports",
            "remove_accounts"]
@@ -242,16 +243,16 @@ def launch(layout: HubLayout, students: list[str], folder: Path, *,
     """``python -m annslam_lib hub --no-studies`` for ``students`` from the prepared folder
     ``layout``, on free loopback ports, with a fresh admin token and passwords; its log in
     ``folder``. Returns once the hub's API answers. The class's studies are whatever
-    ``layout.studies`` holds (``hub_setup.warm_class_studies`` fills it, outside the
+    ``layout.studies`` holds (:func:`.setup.warm_class_studies` fills it, outside the
     deadline)."""
     class_file = folder / "class.txt"
     class_file.write_text("".join(f"{s}\n" for s in students))
     port = free_ports()
     token = secrets.token_hex(24)
-    passwords = {"ANNSLAM_HUB_PASSWORD": secrets.token_urlsafe(12),
-                 "ANNSLAM_HUB_INSTRUCTOR_PASSWORD": secrets.token_urlsafe(36)}
-    env = dict(os.environ, ANNSLAM_HUB_DIR=str(layout.root), ANNSLAM_HUB_ADMIN_TOKEN=token,
-               **passwords)
+    passwords = {_settings.HUB_PASSWORD: secrets.token_urlsafe(12),
+                 _settings.HUB_INSTRUCTOR_PASSWORD: secrets.token_urlsafe(36)}
+    env = {**os.environ, _settings.HUB_DIR: str(layout.root), _settings.HUB_ADMIN_TOKEN: token,
+           **passwords}
     log = folder / "hub.log"
     with open(log, "wb") as fh:
         proc = subprocess.Popen([sys.executable, "-m", "annslam_lib", "hub", "--no-studies",

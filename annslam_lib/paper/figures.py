@@ -6,9 +6,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from ..evaluation.summary import pose_trace
-from ..paper.study import CONFIGURATIONS, Study
-from .blit import log_limits
-from .style import BLUE, FIG_WIDTH, GREEN, PURPLE, RED
+from .study import CONFIGURATIONS, Study
+from ..plots.blit import log_limits
+from ..plots.style import BLUE, FIG_WIDTH, GREEN, PURPLE, RED
 
 __all__ = ["plot_pose_trace", "plot_transfer", "plot_r_scale", "set_r_scale", "r_scale_moving",
            "r_scale_trace_limits"]

@@ -29,11 +29,11 @@ import shutil
 import subprocess
 from pathlib import Path
 
-from .hub import COURSE_ID, HubError, HubLayout
+from . import COURSE_ID, HubError, HubLayout
 
 __all__ = ["release", "collect", "grade", "feedback", "feedback_page", "ACTIONS"]
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 def _notebook(chapter: str) -> Path:
@@ -60,7 +60,7 @@ def _nbgrader(layout: HubLayout, *args: str) -> None:
 
 def release(layout: HubLayout, chapter: str) -> Path:
     """The chapter's student version into the exchange (replacing an earlier release)."""
-    from .release import release as write_release
+    from ..release import release as write_release
 
     src = _notebook(chapter)
     folder = layout.course / "release" / chapter
@@ -125,7 +125,7 @@ def grade(layout: HubLayout, chapter: str, *, log=print) -> list:
     """Grade every collected submission of ``chapter`` with the course's grader; write the
     scores (``course/grades/CHAPTER.json``) and each student's feedback page where nbgrader's
     ``release_feedback`` looks for it."""
-    from .grader import grade_batch
+    from ..grader import grade_batch
 
     _notebook(chapter)
     subs = sorted(layout.course.glob(f"submitted/*/{chapter}/{chapter}.ipynb"))

@@ -1,8 +1,8 @@
 """JupyterHub's configuration for a class: what ``hub/jupyterhub_config.py`` applies.
 
-``python -m annslam_lib hub`` prepares the hub folder (:mod:`.hub`) and starts JupyterHub
-with the settings below passed in the environment (``ANNSLAM_HUB_*``), so the config file
-holds no secret and a hub restarted by hand reads the same settings.
+``python -m annslam_lib hub`` prepares the hub folder (:mod:`annslam_lib.course.hub`) and
+starts JupyterHub with the settings below passed in the environment (``ANNSLAM_HUB_*``), so
+the config file holds no secret and a hub restarted by hand reads the same settings.
 
 Swapping the parts a university changes:
 
@@ -25,29 +25,21 @@ Swapping the parts a university changes:
 """
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
-from .hub import HubError, HubLayout, ensure_account, give_course, read_class, server_env
+from ... import _settings
+from . import HubError, HubLayout, ensure_account, give_course, read_class, server_env
 
 __all__ = ["configure", "check_spawner", "pre_spawn", "REFUSED_SPAWNERS", "SETTINGS"]
 
-#: The environment variables ``python -m annslam_lib hub`` sets for the config file.
-SETTINGS = {
-    "ANNSLAM_HUB_DIR": "the hub folder",
-    "ANNSLAM_HUB_CLASS": "the class file (student names, one a line)",
-    "ANNSLAM_HUB_INSTRUCTOR": "the instructor's account name (default instructor)",
-    "ANNSLAM_HUB_PORT": "the port of the hub's public address on 127.0.0.1 (default 8000); "
-                        "the hub's internal API uses the next one, the proxy's API the one after",
-    "ANNSLAM_HUB_PASSWORD": "the students' password (8 characters or more)",
-    "ANNSLAM_HUB_INSTRUCTOR_PASSWORD": "the instructor's password (32 characters or more)",
-    "ANNSLAM_HUB_ADMIN_TOKEN": "optional: an API token with admin rights on users and servers",
-}
+#: The environment variables ``python -m annslam_lib hub`` sets for the config file, with
+#: what each sets (their defaults and readers: ``annslam_lib._settings.VARIABLES``).
+SETTINGS = {name: _settings.VARIABLES[name].sets for name in _settings.HUB_SETTINGS}
 REFUSED_SPAWNERS = {"simple", "jupyterhub.spawner.SimpleLocalProcessSpawner"}
 
 
 def _role(spawner) -> str:
-    instructor = os.environ.get("ANNSLAM_HUB_INSTRUCTOR") or "instructor"
+    instructor = _settings.hub_instructor()
     return "instructor" if spawner.user.name == instructor else "student"
 
 
@@ -65,14 +57,14 @@ def pre_spawn(spawner) -> None:
 
 def configure(c, env=None) -> None:
     """Apply the class hub's settings (module docstring) to JupyterHub's config ``c``."""
-    env = os.environ if env is None else env
-    layout = HubLayout(Path(env.get("ANNSLAM_HUB_DIR") or HubLayout.from_env().root))
-    instructor = env.get("ANNSLAM_HUB_INSTRUCTOR") or "instructor"
-    if not env.get("ANNSLAM_HUB_CLASS"):
-        raise HubError("ANNSLAM_HUB_CLASS is not set: start the hub with ./course.sh hub "
+    layout = HubLayout(_settings.hub_dir(env) or HubLayout.from_env().root)
+    instructor = _settings.hub_instructor(env)
+    class_file = _settings.hub_class(env)
+    if class_file is None:
+        raise HubError(f"{_settings.HUB_CLASS} is not set: start the hub with ./course.sh hub "
                        "--class FILE")
-    students = read_class(env["ANNSLAM_HUB_CLASS"], instructor)
-    port = int(env.get("ANNSLAM_HUB_PORT") or 8000)
+    students = read_class(class_file, instructor)
+    port = _settings.hub_port(env)
 
     c.JupyterHub.ip = "127.0.0.1"
     c.JupyterHub.port = port
@@ -86,8 +78,8 @@ def configure(c, env=None) -> None:
     c.JupyterHub.cookie_secret_file = str(layout.state / "jupyterhub_cookie_secret")
 
     c.JupyterHub.authenticator_class = "shared-password"
-    c.SharedPasswordAuthenticator.user_password = env.get("ANNSLAM_HUB_PASSWORD", "")
-    c.SharedPasswordAuthenticator.admin_password = env.get("ANNSLAM_HUB_INSTRUCTOR_PASSWORD", "")
+    c.SharedPasswordAuthenticator.user_password = _settings.hub_password(env)
+    c.SharedPasswordAuthenticator.admin_password = _settings.hub_instructor_password(env)
     c.Authenticator.allowed_users = set(students)
     c.Authenticator.admin_users = {instructor}
 
@@ -100,7 +92,7 @@ def configure(c, env=None) -> None:
     c.Spawner.start_timeout = 120
     c.Spawner.http_timeout = 120
 
-    token = env.get("ANNSLAM_HUB_ADMIN_TOKEN")
+    token = _settings.hub_admin_token(env)
     if token:
         c.JupyterHub.services = [{"name": "course-admin", "api_token": token}]
         c.JupyterHub.load_roles = [{

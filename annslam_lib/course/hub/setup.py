@@ -19,13 +19,14 @@ import subprocess
 import sys
 from pathlib import Path
 
-from .hub import (HubError, HubLayout, open_to_all, reachable_by_others, read_class,
-                  running_hub, server_env, system_python, write_role_config)
+from ... import _settings
+from . import (HubError, HubLayout, open_to_all, reachable_by_others, read_class, running_hub,
+               server_env, system_python, write_role_config)
 
 __all__ = ["ROOT", "PREPARED", "prepare", "start", "check_private", "copy_data", "install_proxy",
            "passwords", "warm_class_studies"]
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 PREPARED = ".annslam-hub-prepared"          # written when every stage of prepare() passed
 
 
@@ -53,7 +54,7 @@ def install_student_env(layout: HubLayout) -> None:
 
 
 def release_notebooks(layout: HubLayout) -> list[Path]:
-    from .release import release
+    from ..release import release
 
     for old in layout.release.glob("*.ipynb"):
         old.unlink()
@@ -67,13 +68,11 @@ def copy_data(layout: HubLayout) -> None:
     """One verified copy of the course's datasets in the hub folder, read-only for students:
     copied from the data folder this process uses (``ANNSLAM_DATA``, else the user cache,
     downloaded there first if missing), then verified where it lies."""
-    from ..data import fetch, registry
+    from ...data import fetch, registry
 
     names = registry.core()
     sources = {n: fetch.ensure(n, progress=False) for n in names}
-    before = os.environ.get(fetch.ENV_DIR)
-    os.environ[fetch.ENV_DIR] = str(layout.data)
-    try:
+    with _settings.temporarily(_settings.DATA, str(layout.data)):     # verified where it lies
         for n in names:
             entry = registry.get(n)
             dest = layout.data / entry.folder
@@ -83,11 +82,6 @@ def copy_data(layout: HubLayout) -> None:
                 if not target.exists() or target.stat().st_size != f.size:
                     shutil.copyfile(sources[n] / f.name, target)
             fetch.verify(n)
-    finally:
-        if before is None:
-            os.environ.pop(fetch.ENV_DIR, None)
-        else:
-            os.environ[fetch.ENV_DIR] = before
     open_to_all(layout.data)
     say(f"data: {len(names)} datasets verified in {layout.data}")
 
@@ -132,11 +126,11 @@ def image_files(layout: HubLayout) -> None:
 def passwords(layout: HubLayout, env) -> dict[str, str]:
     """The students' password (required) and the instructor's (generated once and kept in
     ``state/instructor-password`` when not given)."""
-    student = env.get("ANNSLAM_HUB_PASSWORD", "")
+    student = _settings.hub_password(env)
     if len(student) < 8:
-        raise HubError("set ANNSLAM_HUB_PASSWORD to the students' password (8 characters or "
-                       "more) before starting the hub")
-    instructor = env.get("ANNSLAM_HUB_INSTRUCTOR_PASSWORD", "")
+        raise HubError(f"set {_settings.HUB_PASSWORD} to the students' password (8 characters "
+                       "or more) before starting the hub")
+    instructor = _settings.hub_instructor_password(env)
     kept = layout.state / "instructor-password"
     if not instructor:
         if not kept.exists():
@@ -145,10 +139,10 @@ def passwords(layout: HubLayout, env) -> dict[str, str]:
         instructor = kept.read_text().strip()
         say(f"the instructor's password is in {kept}")
     if len(instructor) < 32:
-        raise HubError("ANNSLAM_HUB_INSTRUCTOR_PASSWORD must have 32 characters or more")
+        raise HubError(f"{_settings.HUB_INSTRUCTOR_PASSWORD} must have 32 characters or more")
     if instructor == student:
         raise HubError("the instructor's and the students' passwords must differ")
-    return {"ANNSLAM_HUB_PASSWORD": student, "ANNSLAM_HUB_INSTRUCTOR_PASSWORD": instructor}
+    return {_settings.HUB_PASSWORD: student, _settings.HUB_INSTRUCTOR_PASSWORD: instructor}
 
 
 def check_private() -> None:
@@ -164,7 +158,7 @@ def check_private() -> None:
 def check_grading() -> None:
     """The class's work is graded in the course's sandbox: refuse to start a hub on a
     machine where it cannot be made, naming the cause and the fix."""
-    from .sandbox import bwrap_problem
+    from ..sandbox import bwrap_problem
 
     why = bwrap_problem()
     if why:
@@ -187,8 +181,8 @@ def warm_class_studies(layout: HubLayout, notebooks: Path | None = None) -> None
     removed first."""
     folder = Path(ROOT / "notebooks" if notebooks is None else notebooks)
     python = str(layout.env / "bin" / "python")
-    env = {**os.environ, **server_env(layout, "student"), "ANNSLAM_CACHE": str(layout.studies)}
-    env.pop("ANNSLAM_CLASS_CACHE")
+    env = {**os.environ, **server_env(layout, "student"), _settings.CACHE: str(layout.studies)}
+    del env[_settings.CLASS_CACHE]     # filled as this run's own cache, not read as the class's
     code = subprocess.run([python, "-c", "from annslam_lib._cache import code_hash; "
                            "print(code_hash())"], env=env, capture_output=True, text=True)
     h = hashlib.sha256(code.stdout.encode() if code.returncode == 0 else os.urandom(16))
@@ -251,9 +245,9 @@ def start(layout: HubLayout, class_file, *, port: int = 8000,
     check_grading()
     students = prepare(layout, class_file, instructor, studies=studies)
     env.update(passwords(layout, env))
-    env.update({"ANNSLAM_HUB_DIR": str(layout.root), "ANNSLAM_HUB_CLASS":
-                str(Path(class_file).resolve()), "ANNSLAM_HUB_INSTRUCTOR": instructor,
-                "ANNSLAM_HUB_PORT": str(port)})
+    env.update({_settings.HUB_DIR: str(layout.root),
+                _settings.HUB_CLASS: str(Path(class_file).resolve()),
+                _settings.HUB_INSTRUCTOR: instructor, _settings.HUB_PORT: str(port)})
     url = f"http://127.0.0.1:{port}"
     (layout.state / "hub.json").write_text(json.dumps({"pid": os.getpid(), "url": url}) + "\n")
     say(f"JupyterHub for {len(students)} students and {instructor!r} at {url}")
