@@ -18,8 +18,10 @@ trained networks). A call's key is the SHA-256 of
 
 The entry is a pickle with its own SHA-256 beside it; an entry whose bytes do not match (a
 torn or edited file) is recomputed and rewritten, with a warning, and counted in
-:data:`STATS`. Writes are atomic (a temporary file renamed), so two kernels computing the
-same study at once leave one whole entry. The folder is ``ANNSLAM_CACHE`` if set, else
+:data:`STATS`. Writes are atomic (a temporary file renamed), so a reader never sees half an
+entry; and a study is computed by one process at a time: a second process (a kernel, a test
+worker) asking for the same entry meanwhile waits on the entry's lock file and then reads what
+the first stored, instead of computing it again (``waited`` in :data:`STATS`). The folder is ``ANNSLAM_CACHE`` if set, else
 ``platformdirs.user_cache_dir('annslam')/studies``; ``ANNSLAM_CACHE=off`` turns the cache
 off. A pickle can run code when loaded, so entries are read only from a folder that is
 owned by the current user and not writable by group or others; any other folder is used as
@@ -39,6 +41,7 @@ test recomputes a cached study and compares (tests/test_cache.py).
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import hashlib
@@ -59,9 +62,10 @@ __all__ = ["memoize", "cache_dir", "class_cache_dir", "clear", "key_of", "code_h
 #: Per process: hits, class_hits (read from the class's folder), misses (computed and
 #: stored), repaired (corrupt entry recomputed), unusable (folder not safe or not writable:
 #: computed, not stored), untrusted (a class folder others could change: ignored), unkeyed
-#: (an argument without a content hash: computed, not stored).
+#: (an argument without a content hash: computed, not stored), waited (found after waiting
+#: for another process computing the same entry).
 STATS = {"hits": 0, "class_hits": 0, "misses": 0, "repaired": 0, "unusable": 0,
-         "untrusted": 0, "unkeyed": 0}
+         "untrusted": 0, "unkeyed": 0, "waited": 0}
 
 _ROOT = Path(__file__).resolve().parent
 _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
@@ -194,14 +198,17 @@ def _safe(folder: Path) -> bool:
     return st.st_uid == os.getuid() and not st.st_mode & (stat.S_IWGRP | stat.S_IWOTH)
 
 
-def _load(entry: Path):
-    """(True, value) for a whole entry, (False, None) for none; a corrupt one is reported."""
+def _load(entry: Path, report: bool = True):
+    """(True, value) for a whole entry, (False, None) for none; a corrupt one is reported
+    (unless ``report`` is False: the same entry, looked at again)."""
     try:
         payload = entry.read_bytes()
         digest = entry.with_suffix(".sha256").read_text().strip()
     except FileNotFoundError:
         return False, None
     if hashlib.sha256(payload).hexdigest() != digest:
+        if not report:
+            return False, None
         warnings.warn(f"cache entry {entry.name} does not match its checksum: recomputed",
                       RuntimeWarning, stacklevel=3)
         STATS["repaired"] += 1
@@ -217,6 +224,23 @@ def _store(entry: Path, value) -> None:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
         os.replace(tmp, entry.with_suffix(suffix))
+
+
+@contextlib.contextmanager
+def _computing(entry: Path):
+    """Hold the entry's lock file while its value is computed and stored: another process
+    asking for it waits here (``flock``: released by the kernel if the holder dies)."""
+    try:
+        import fcntl
+        fd = os.open(entry.with_suffix(".lock"), os.O_RDWR | os.O_CREAT, 0o600)
+    except (ImportError, OSError):     # no flock here, or the folder refuses: compute
+        yield
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)                   # closing releases the lock
 
 
 def memoize(fn=None, *, ignore=()):
@@ -259,14 +283,19 @@ def memoize(fn=None, *, ignore=()):
         found, value = _load_class(entry.name)       # the class's, read, never copied
         if found:
             return value
-        value = fn(*args, **kwargs)
-        STATS["misses"] += 1
-        try:
-            _store(entry, value)
-        except OSError as e:           # a full or read-only disk: the result still stands
-            STATS["unusable"] += 1
-            warnings.warn(f"could not write the study cache entry {entry}: {e}", RuntimeWarning,
-                          stacklevel=2)
+        with _computing(entry):
+            found, value = _load(entry, report=False)   # stored by another process meanwhile
+            if found:
+                STATS["waited"] += 1
+                return value
+            value = fn(*args, **kwargs)
+            STATS["misses"] += 1
+            try:
+                _store(entry, value)
+            except OSError as e:       # a full or read-only disk: the result still stands
+                STATS["unusable"] += 1
+                warnings.warn(f"could not write the study cache entry {entry}: {e}",
+                              RuntimeWarning, stacklevel=2)
         return value
 
     wrapper.uncached = fn
@@ -282,5 +311,6 @@ def clear() -> int:
     for p in folder.glob("*.pkl"):
         p.unlink(missing_ok=True)
         p.with_suffix(".sha256").unlink(missing_ok=True)
+        p.with_suffix(".lock").unlink(missing_ok=True)
         n += 1
     return n

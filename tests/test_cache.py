@@ -272,3 +272,41 @@ def test_warm_runs_every_notebook_past_its_exercises_and_fills_the_cache(cache, 
     runner.run_cached(simulate.simulate(seed=0, laps=1))
     assert _cache.STATS["hits"] == 1 and _cache.STATS["misses"] == 0
     assert cli.main(["cache", "warm", "--notebooks", str(tmp_path / "none")]) == 2
+
+
+_SLOW_STUDY = """
+import json, sys, time
+from annslam_lib import _cache
+
+@_cache.memoize
+def slow_study(n):
+    with open(sys.argv[1], "a") as f:      # one line per computation, from any process
+        f.write("computed\\n")
+    time.sleep(1.5)
+    return [k * k for k in range(n)]
+
+value = slow_study(400)
+print(json.dumps({"sum": sum(value), "stats": _cache.STATS}))
+"""
+
+
+def test_two_processes_asking_for_one_study_compute_it_once(cache, tmp_path):
+    """Two processes (two test workers, two kernels) asking for the same entry at once: one
+    computes it, the other waits on the entry's lock and reads what the first stored."""
+    import json
+    import subprocess
+    import sys
+
+    log = tmp_path / "computations.txt"
+    script = tmp_path / "study.py"
+    script.write_text(_SLOW_STUDY)
+    env = {**os.environ, "ANNSLAM_CACHE": str(cache)}
+    procs = [subprocess.Popen([sys.executable, str(script), str(log)], env=env,
+                              stdout=subprocess.PIPE, text=True) for _ in range(2)]
+    outs = [json.loads(p.communicate(timeout=120)[0]) for p in procs]
+    assert log.read_text().splitlines() == ["computed"]
+    assert [o["sum"] for o in outs] == [sum(k * k for k in range(400))] * 2
+    stats = sorted((o["stats"]["misses"], o["stats"]["waited"], o["stats"]["hits"]) for o in outs)
+    # the second either waited on the lock or (started late) found the entry stored
+    assert stats[1] == (1, 0, 0) and stats[0] in ((0, 1, 0), (0, 0, 1))
+    assert len(list(cache.glob("slow_study-*.pkl"))) == 1
