@@ -26,6 +26,15 @@ def _modules():
     return out
 
 
+def _import_base(pkg: str, node: ast.ImportFrom) -> str:
+    """The absolute module a ``from ... import`` names, in package ``pkg``."""
+    base = node.module or ""
+    if node.level:
+        up = pkg.split(".")[: len(pkg.split(".")) - (node.level - 1)]
+        base = ".".join(up + ([base] if base else []))
+    return base
+
+
 def _imports(name: str, path: pathlib.Path, known) -> set[str]:
     """Library modules imported by ``name`` at module level or in functions (a lazy import
     is still a dependency, but function-level imports cannot form an import-time cycle, so
@@ -41,10 +50,7 @@ def _imports(name: str, path: pathlib.Path, known) -> set[str]:
             if isinstance(n, ast.Import):
                 found.update(a.name for a in n.names)
             elif isinstance(n, ast.ImportFrom):
-                base = n.module or ""
-                if n.level:
-                    up = pkg.split(".")[: len(pkg.split(".")) - (n.level - 1)]
-                    base = ".".join(up + ([base] if base else []))
+                base = _import_base(pkg, n)
                 found.add(base)
                 found.update(f"{base}.{a.name}" for a in n.names)
     return {m for m in found if m in known and m != name}
@@ -98,10 +104,7 @@ def _all_imports(name: str, path: pathlib.Path) -> list[tuple[int, str]]:
         if isinstance(n, ast.Import):
             out += [(n.lineno, a.name) for a in n.names]
         elif isinstance(n, ast.ImportFrom):
-            base = n.module or ""
-            if n.level:
-                up = pkg.split(".")[: len(pkg.split(".")) - (n.level - 1)]
-                base = ".".join(up + ([base] if base else []))
+            base = _import_base(pkg, n)
             out += [(n.lineno, base)] + [(n.lineno, f"{base}.{a.name}") for a in n.names]
     return [(line, m) for line, m in out if m.startswith("annslam_lib.")]
 
@@ -152,10 +155,7 @@ def _private_uses(name: str, path: pathlib.Path, modules) -> list[str]:
     aliases, found = {}, []
     for n in ast.walk(tree):
         if isinstance(n, ast.ImportFrom):
-            base = n.module or ""
-            if n.level:
-                up = pkg.split(".")[: len(pkg.split(".")) - (n.level - 1)]
-                base = ".".join(up + ([base] if base else []))
+            base = _import_base(pkg, n)
             if not base.startswith("annslam_lib") or base == name:
                 continue
             for a in n.names:
