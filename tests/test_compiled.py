@@ -263,3 +263,37 @@ def test_victoria_park_gated_either_way_decides_the_same(victoria_park, fej):
     np.testing.assert_array_equal(auto.observations.landmark, plain.observations.landmark)
     np.testing.assert_allclose(auto.trajectory, plain.trajectory, rtol=0, atol=1e-8)
     np.testing.assert_allclose(auto.landmarks, plain.landmarks, rtol=0, atol=1e-8)
+
+
+def test_a_study_gates_all_its_runs_by_their_scans_together_and_judges_the_same(monkeypatch):
+    """A Monte-Carlo study pays for the compiled loop once for all its runs: a study whose
+    runs hold MIN_SCANS scans together uses it, a single run does not; with the numpy gating
+    forced, the study's every decision and its judgement are the same, its NEES within
+    rounding."""
+    from annslam_lib.evaluation import consistency
+
+    asked = []
+    real_run = runner.run
+
+    def spy(*args, **kwargs):
+        asked.append(kwargs.get("gating"))
+        return real_run(*args, **kwargs)
+
+    monkeypatch.setattr(runner, "run", spy)
+    scans = len(simulate.simulate(seed=7300, raw_laser=False, laps=1).detections)
+    n = -(-compiled.MIN_SCANS // scans)                       # just enough runs together
+    seeds = range(7300, 7300 + n)
+    study = consistency.monte_carlo.uncached(seeds, "midpoint", laps=1)
+    assert asked == ["compiled"] * n
+    asked.clear()
+    consistency.monte_carlo.uncached(seeds[:1], "midpoint", laps=1)
+    assert asked == ["numpy"]
+    asked.clear()
+    monkeypatch.setenv("ANNSLAM_KERNEL", "numpy")
+    plain = consistency.monte_carlo.uncached(seeds, "midpoint", laps=1)
+    assert asked == ["numpy"] * n
+    assert plain.mapped == study.mapped
+    np.testing.assert_array_equal(plain.rejected_runs, study.rejected_runs)
+    np.testing.assert_allclose(plain.nees_runs, study.nees_runs, rtol=1e-9, atol=0)
+    assert plain.nees.summary() == study.nees.summary()
+    assert plain.map.summary() == study.map.summary()

@@ -1,4 +1,4 @@
-"""The grader's batch of a check's inputs (``RemoteFunction.__annslam_prefetch__``): each
+"""The grader's economy of round trips: its batch of a check's inputs (``RemoteFunction.__annslam_prefetch__``): each
 distinct input goes to the kernel once, a prefetched reply is used once, and a second
 prefetch of the same inputs sends nothing new."""
 import json
@@ -33,3 +33,62 @@ def test_each_distinct_input_is_sent_once_and_a_repeat_prefetch_sends_nothing():
     assert f(3) == 9 and f(2) == 4 and len(calls) == 1    # answered from the batch
     assert f(2) == 4                                       # used once: asked again
     assert [m for m, _ in calls] == ["call_many", "call"]
+
+
+# -- one run of a student's whole loop per hidden run, for every test cell ----------------
+
+def test_a_session_keeps_one_proxy_per_name_until_its_kernel_restarts():
+    from annslam_lib.course.grader import _Session
+
+    session = _Session(SimpleNamespace(), SimpleNamespace())
+    first = session.proxy("my_localise")
+    assert session.proxy("my_localise") is first           # the next test cell: same proxy
+    assert session.proxy("my_slam") is not first
+    session.restarts += 1                                  # a new kernel: a new proxy
+    again = session.proxy("my_localise")
+    assert again is not first and session.proxy("my_localise") is again
+
+
+def test_a_loop_result_is_kept_per_function_run_and_rule_and_forgotten_after_a_submission():
+    import numpy as np
+
+    from annslam_lib.grading import _tracks, forget_results
+    from annslam_lib.grading.core import forbids
+
+    calls = []
+
+    def loop(run):
+        calls.append(run)
+        K = 4
+        return {"t": np.arange(K, dtype=float), "pose": np.zeros((K, 3)),
+                "pose_cov": np.tile(np.eye(3), (K, 1, 1)), "landmarks": np.zeros(0),
+                "landmark_cov": np.zeros((0, 0))}
+
+    def other_library_function():
+        pass
+
+    @forbids(np.linalg.inv)
+    def check(fn, run):
+        return _tracks.result_of(fn, run, "my_localise")
+
+    @forbids(other_library_function)
+    def other_check(fn, run):
+        return _tracks.result_of(fn, run, "my_localise")
+
+    forget_results()
+    _tracks.CACHE[("reference", "sim:1:1")] = (None, {"nees_mean": 1.0})
+    try:
+        check(loop, "sim:1:1")
+        check(loop, "sim:1:1")                      # a second test cell: read back
+        assert calls == ["sim:1:1"]
+        check(loop, "sim:2:1")
+        assert calls == ["sim:1:1", "sim:2:1"]
+        other_check(loop, "sim:1:1")                # another rule: computed under it
+        assert calls == ["sim:1:1", "sim:2:1", "sim:1:1"]
+        forget_results()
+        assert list(_tracks.CACHE) == [("reference", "sim:1:1")]   # the reference stays
+        check(loop, "sim:1:1")
+        assert len(calls) == 4
+    finally:
+        _tracks.CACHE.pop(("reference", "sim:1:1"), None)
+        forget_results()

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._cache import memoize
 from ..models.geometry import wrap_angle
 from ..models.observation import observe
 from ..plots.style import BLUE, ORANGE, PALETTE, figure
@@ -169,12 +170,14 @@ def _update(x, P, z, idx, R, defect):
     return x, P, nis, nu[1::2]
 
 
+@memoize
 def run_filter(f: LabFilter, run: str) -> dict:
     """Run lab filter ``f`` on ``run``: the harness's track (t, pose, pose_cov, landmarks,
     landmark_cov), plus per scan with an update its time, NIS and dof
     (``nis_t``, ``nis``, ``nis_dof``) and every bearing innovation
     (``bearing_t``, ``bearing_innovation``), and ``stopped``: None, or why the filter
-    stopped (an innovation covariance not positive definite) and when."""
+    stopped (an innovation covariance not positive definite) and when. Computed once per
+    machine, then read back (the lab's Run All and its figures ask for the same runs)."""
     defect = f._defect
     track = Track()
     it = steps(run)

@@ -57,6 +57,7 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from ..grading import forget_results
 from ..grading.core import (GradingError, forbidden, forbidden_message, full_feedback,
                             grading_student)
 from . import codec
@@ -292,6 +293,17 @@ class _Session:
         self.restarts = 0
         self.calls = 0
         self.helper_error = ""
+        self._proxies: dict[str, tuple[int, RemoteFunction]] = {}
+
+    def proxy(self, name: str) -> RemoteFunction:
+        """The proxy of the student's ``name``: one per kernel, so that checks which keep a
+        function's results by the function (``grading.forget_results``: a whole filter run per
+        hidden run) run it once for all the test cells, as they do in the notebook; no
+        student code runs between the test cells, and after a restart a new proxy is made."""
+        made = self._proxies.get(name)
+        if made is None or made[0] != self.restarts:
+            made = self._proxies[name] = (self.restarts, RemoteFunction(self, name))
+        return made[1]
 
     def _after_start(self, first: bool) -> None:
         res = self.sandbox.execute("import annslam_lib.course.kernel_side as __annslam_kernel__",
@@ -392,7 +404,7 @@ def _exercise(session: _Session, cell: PlannedCell, solutions: dict[str, int]) -
                       f"submission's kernel: {session.helper_error}")
     # 3. the check itself, here, with the student's functions behind proxies
     for name in student_names:
-        ns[name] = RemoteFunction(session, name)
+        ns[name] = session.proxy(name)
     out = io.StringIO()
     try:
         with contextlib.redirect_stdout(out):
@@ -579,6 +591,7 @@ def grade_submission(path, instructor, *, limits: Limits = Limits(), isolation: 
                 except _KernelGone as e:
                     g.exercises.append(ExerciseResult(cell.grade_id, 0.0, cell.points,
                                                       "kernel died", str(e)))
+            forget_results()               # the results of this submission's functions
             if session.restarts:
                 g.notes.append(f"the kernel was restarted {session.restarts} time(s) and the "
                                "notebook's good cells replayed")

@@ -588,6 +588,9 @@ def monte_carlo(seeds, motion_model: str = "euler", route: str = "loop", laps: i
     measured on 30 runs at 2 deg, map NEES per dof 2.2 (standard filter) and 3.6 (FEJ), 0.96
     and 0.93 once each map is rigidly aligned to the truth and the three global directions
     are left out; read the pose NEES there, or the aligned map.
+    The runs gate with the compiled loop (``slam.compiled``) when all of them together are
+    long enough to win back loading it (``compiled.use_compiled`` of the study's scans: a
+    study of a dozen runs or more); its distances equal the numpy code's to rounding.
     Computed once per machine (``annslam_lib._cache``).
 
     Parameters
@@ -620,6 +623,7 @@ def monte_carlo(seeds, motion_model: str = "euler", route: str = "loop", laps: i
         If a simulated run skipped a scan.
     """
     from ..data import simulate
+    from ..slam import compiled
     from ..slam.config import SlamConfig
     from ..slam.results import STATUS
     from ..slam.runner import run
@@ -630,16 +634,19 @@ def monte_carlo(seeds, motion_model: str = "euler", route: str = "loop", laps: i
     cfg = SlamConfig.for_dataset("simulated", motion_model=motion_model, **config)
     nees, nis, dof, mapped, maps, rejected = [], [], [], [], [], []
     _checks.flag("draw_initial", draw_initial)
-    t_scan = None
+    t_scan, gating = None, "numpy"
     for seed in seeds:                     # one run in memory at a time (studies of hundreds)
         ds = simulate.simulate(seed=seed, route=route, laps=laps, raw_laser=False)
-        t_scan = ds.detections.t if t_scan is None else t_scan
+        if t_scan is None:
+            t_scan = ds.detections.t
+            if compiled.use_compiled(len(seeds) * len(ds.detections)):   # the whole study's
+                gating = "compiled"
         run_cfg = cfg
         if draw_initial:
             sd = np.array([cfg.initial_sigma_xy, cfg.initial_sigma_xy, cfg.initial_sigma_phi])
             eps = np.random.default_rng([int(seed), 25]).standard_normal(3) * sd
             run_cfg = cfg.replace(initial_pose=tuple(ds.truth.poses[0, 1:4] + eps))
-        r = run(ds, run_cfg, progress=False)
+        r = run(ds, run_cfg, progress=False, gating=gating)
         if not np.array_equal(r.scan_index, np.arange(len(ds.detections))):
             raise RuntimeError("a simulated run skipped a scan: the per-scan statistics need all")
         nees.append(pose_nees(r, ds))

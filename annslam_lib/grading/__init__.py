@@ -18,12 +18,16 @@ known mistakes (including the paper's misprinted equations):
 - ``verdict``: chapter 08 (the verdict)
 - ``capstone``: chapter 09 (a student's whole EKF-SLAM loop, scored on unseen runs)
 - ``smoothing``: chapter 10 (factor graphs)
+
+:func:`forget_results` drops the whole-loop results the checks of 04a and 09 keep per
+student function and run (a grader calls it after each submission).
 """
 from .core import (NOT_WRITTEN, GradingError, Mistake, call, check_function, check_jacobian,
                    check_raises, describe, fail, fmt)
+from ._tracks import forget_results
 
 __all__ = ["NOT_WRITTEN", "GradingError", "Mistake", "call", "check_function", "check_jacobian",
-           "check_raises", "describe", "fail", "fmt",
+           "check_raises", "describe", "fail", "fmt", "forget_results",
            "core", "kinematics", "kalman", "observation", "association", "localisation",
            "localisation_loop", "ekf", "diagnose", "metrics", "ann", "verdict", "capstone",
            "smoothing"]

@@ -22,8 +22,10 @@ about 0.27 s CPU once to import numba (0.12-0.14 s) and load the cached machine 
 (0.14-0.15 s), about 0.3 s more the first time on a machine (compiling it). Break-even is
 thus near 5000 scans of a Victoria Park-sized map (more for smaller maps: the saving grows
 with the landmarks): :func:`use_compiled` switches the loop on for runs at least
-:data:`MIN_SCANS` long (Victoria Park; not the Car Park's 586 scans nor the simulator's
-runs), so that a chapter without such a run never imports numba.
+:data:`MIN_SCANS` long (Victoria Park; not the Car Park's 586 scans nor one simulated
+run), so that a chapter without such a run never imports numba; a Monte-Carlo study
+(``evaluation.consistency.monte_carlo``) asks for all its runs' scans together, since one
+process pays the loading once for all of them.
 
 ``ANNSLAM_KERNEL=numpy`` in the environment switches it off everywhere (the grader's sandbox
 does: it runs student code, which must not share a cache of compiled code with the course;
