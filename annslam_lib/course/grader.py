@@ -591,7 +591,6 @@ def grade_submission(path, instructor, *, limits: Limits = Limits(), isolation: 
                 except _KernelGone as e:
                     g.exercises.append(ExerciseResult(cell.grade_id, 0.0, cell.points,
                                                       "kernel died", str(e)))
-            forget_results()               # the results of this submission's functions
             if session.restarts:
                 g.notes.append(f"the kernel was restarted {session.restarts} time(s) and the "
                                "notebook's good cells replayed")
@@ -600,6 +599,7 @@ def grade_submission(path, instructor, *, limits: Limits = Limits(), isolation: 
     except Exception as e:               # the grader's own trouble: say so, never a score
         g.graded, g.reason = False, f"grading failed: {type(e).__name__}: {e}"
     finally:
+        forget_results()                 # the results of this submission's functions
         if guard is not None:
             tampered = guard.changes()
     if tampered:

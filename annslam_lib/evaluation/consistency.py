@@ -589,8 +589,9 @@ def monte_carlo(seeds, motion_model: str = "euler", route: str = "loop", laps: i
     and 0.93 once each map is rigidly aligned to the truth and the three global directions
     are left out; read the pose NEES there, or the aligned map.
     The runs gate with the compiled loop (``slam.compiled``) when all of them together are
-    long enough to win back loading it (``compiled.use_compiled`` of the study's scans: a
-    study of a dozen runs or more); its distances equal the numpy code's to rounding.
+    long enough to win back loading it (``compiled.use_compiled`` of the study's scans: nine
+    or more of the simulator's two-lap runs); its distances equal the numpy code's to
+    rounding.
     Computed once per machine (``annslam_lib._cache``).
 
     Parameters

@@ -7,7 +7,8 @@ import numpy as np
 
 from .core import call, fail, forbidden
 
-__all__ = ["CACHE", "KEYS", "forget_results", "result_of", "reference_scores", "ratio_message", "try_run"]
+__all__ = ["CACHE", "KEYS", "forget_results", "result_of", "reference_scores", "ratio_message",
+           "try_run"]
 
 KEYS = ("t", "pose", "pose_cov", "landmarks", "landmark_cov")
 #: Results by (id of the loop, run, forbidden paths), and the reference scores by
