@@ -5,7 +5,8 @@ change silently while every printed number stays the same. This hook extends its
 of each cell (not the ones marked ``# NBVAL_IGNORE_OUTPUT``, which nbval does not compare at
 all): the cell must produce as many PNG figures as are stored, each of the same size, and
 differing in at most FIGURE_PIXEL_TOLERANCE of its pixels by more than FIGURE_LEVEL_TOLERANCE
-in any channel (anti-aliasing noise passes; a moved curve, a changed label or colour fails).
+in any channel (anti-aliasing noise passes; a moved curve, a changed label or colour fails),
+and carrying the same alt text (``annslam_lib.plots.alt``) as stored.
 ``tests/test_figure_regression.py`` runs it end to end on a small notebook.
 """
 from __future__ import annotations
@@ -51,6 +52,12 @@ def _pngs(outputs) -> list[str]:
     return found
 
 
+def _alts(outputs) -> list[str]:
+    """The alt text of each PNG output ('' where there is none)."""
+    return [(o.get("metadata") or {}).get("image/png", {}).get("alt", "")
+            for o in outputs if hasattr(o, "get") and "image/png" in o.get("data", {})]
+
+
 def pytest_configure(config):
     _own_study_cache(config)
     _compile_library(config)
@@ -76,6 +83,12 @@ def pytest_configure(config):
                 self.comparison_traceback.append(
                     f"figure {k + 1} of the cell changed: {problem}. If the change is meant, "
                     "refresh the notebook (./course.sh refresh) and look at the new figure.")
+                return False
+        for k, (s, n) in enumerate(zip(_alts(ref), _alts(test))):
+            if s != n:
+                self.comparison_traceback.append(
+                    f"the alt text of figure {k + 1} of the cell changed: stored {s!r}, now "
+                    f"{n!r}. Refresh the notebook (./course.sh refresh).")
                 return False
         return True
 

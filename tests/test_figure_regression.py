@@ -90,3 +90,15 @@ def test_a_redrawn_curve_a_patch_and_a_missing_figure_fail(stored, tmp_path):
     assert report.count("figure 1 of the cell changed") == 2, report[-3000:]
     assert "of the pixels differ" in run.stdout
     assert "figure(s)" in run.stdout or "dissimilar number" in run.stdout
+
+
+def test_a_figure_whose_alt_text_changed_fails(stored, tmp_path):
+    """The alt text is compared as the pixels are: a stored figure whose alt text the code
+    no longer produces (here: the cell draws without one) fails, naming what changed."""
+    nb = nbformat.from_dict(stored[0])
+    outs, i = _png(nb, 1)
+    outs[i].setdefault("metadata", {})["image/png"] = {"alt": "Figure: a curve that rises."}
+    run = _nbval(tmp_path, nb)
+    assert run.returncode == 1, run.stdout[-2000:]
+    assert "1 failed, 2 passed" in run.stdout, run.stdout[-2000:]
+    assert "the alt text of figure 1 of the cell changed" in run.stdout

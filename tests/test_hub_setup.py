@@ -458,3 +458,29 @@ def test_a_feedback_page_escapes_what_the_student_wrote():
                         errors=[evil])
     page = feedback_page(g)
     assert "<script>" not in page and page.count("&lt;script&gt;") == 3
+
+
+def test_a_feedback_page_names_its_language_and_its_table_headers():
+    """What a screen reader needs from the page (WCAG 2.1 3.1.1 language of page, 1.3.1
+    table headers): a lang attribute, a table caption, column headers marked as such."""
+    from html.parser import HTMLParser
+
+    from annslam_lib.course.grader import ExerciseResult, SubmissionGrade
+    from annslam_lib.course.hub.classroom import feedback_page
+
+    g = SubmissionGrade("x.ipynb", "01_kinematics.ipynb", "ann", "01_kinematics", 2, 4,
+                        [ExerciseResult("ex01-axle-speed", 2, 2, "passed", "ok"),
+                         ExerciseResult("ex01-heading", 0, 2, "failed", "sign")])
+    seen: dict = {"html": [], "th": [], "caption": 0, "td": 0}
+
+    class Tags(HTMLParser):
+        def handle_starttag(self, tag, attrs):
+            if tag in ("html", "th"):
+                seen[tag].append(dict(attrs))
+            elif tag in ("caption", "td"):
+                seen[tag] += 1
+
+    Tags().feed(feedback_page(g))
+    assert seen["html"] == [{"lang": "en"}]
+    assert [a.get("scope") for a in seen["th"]] == ["col"] * 4
+    assert seen["caption"] == 1 and seen["td"] == 8

@@ -7,6 +7,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
+from annslam_lib.plots.alt import alt_text
 from annslam_lib import ann
 from annslam_lib.ann import evaluation
 from annslam_lib.chapters import ch07_ann_training as ch07
@@ -85,8 +86,8 @@ def test_plot_hidden_grid_shows_means_and_baselines(grid):
 
 def test_explorer_follows_the_sliders(grid, monkeypatch):
     g, _ = grid
-    shown = []
-    monkeypatch.setattr(ch07, "show_png", shown.append)
+    shown, alts = [], []
+    monkeypatch.setattr(ch07, "show_png", lambda png, alt: (shown.append(png), alts.append(alt)))
     w = ch07.hidden_size_explorer(g, hidden=1, seed=0)
     # the plots are redrawn on release only, not at every intermediate slider position
     assert w.children[0].continuous_update is False and w.children[1].continuous_update is False
@@ -105,6 +106,8 @@ def test_explorer_follows_the_sliders(grid, monkeypatch):
     assert s["lbo_rmse"] == g.lbo[1, 1] and s["n_params"] == g.n_params[1]
     # Every draw showed a picture, the figure's (blitted: plots.blit.Blit) ...
     assert len(shown) == 3 and all(p[:8] == b"\x89PNG\r\n\x1a\n" for p in shown)
+    # each with the alt text read from the figure drawn
+    assert alts[-1] == alt_text(w.view.fig) and len(alts[-1]) >= 40
     assert shown[-1] != shown[0]
     # ... whose left panel is that network's performance plot: its lines are its history.
     perf = w.view.fig.axes[0]

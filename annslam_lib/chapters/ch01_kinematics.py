@@ -18,6 +18,7 @@ from ..evaluation.trajectory import TrajectoryErrors
 from ..plots.data import car_outline
 from ..models.vehicle import ACFR_UTE, Vehicle
 from ..plots.blit import Blit, drawn_by
+from ..plots.alt import alt_text
 from ..plots.style import BLUE, FIG_WIDTH, GREEN, ORANGE, RED, figure, show_png, widget_figure
 from ..plots.style import notebook_setup as setup
 
@@ -132,7 +133,7 @@ def kinematics_explorer(vehicle: Vehicle = ACFR_UTE, *, speed: float = 2.0,
             ax = views[0].fig.axes[0]
             views[0].clear(keep=(ax.title,))
             views[0].set_moving(_draw_arcs(s, ax, title))
-        show_png(views[0].png())
+        show_png(views[0].png(), alt_text(views[0].fig))
 
     sliders = dict(
         speed=FloatSlider(value=speed, min=0.0, max=5.0, step=0.1, description="speed [m/s]",

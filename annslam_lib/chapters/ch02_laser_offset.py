@@ -23,6 +23,7 @@ from ..models.geometry import rot
 from ..models.geometry import interpolate_poses
 from ..plots.data import car_outline
 from ..plots.blit import Blit, drawn_by
+from ..plots.alt import alt_text
 from ..plots.style import BLUE, GREEN, PURPLE, RED, figure, show_png, widget_figure
 from ..data.records import Dataset, Odometry
 from ..models.vehicle import Vehicle
@@ -288,7 +289,7 @@ def offset_explorer(ds: Dataset, t0: float = TURN[0], t1: float = TURN[1]):
         print(f"a = {a:.2f} m, b = {b:.2f} m: laser path to GPS RMS {s['rms']:.3f} m, "
               f"max {s['max']:.3f} m over {s['fixes']} fixes; heading correction "
               f"{s['heading_correction_deg']:.2f} deg")
-        show_png(views[0].png())
+        show_png(views[0].png(), alt_text(views[0].fig))
 
     widget = interactive(
         draw,

@@ -22,6 +22,7 @@ from ..models.geometry import wrap_angle
 from ..evaluation.residuals import ROUNDING
 from ..models.observation import observe
 from ..plots.blit import Blit, drawn_by
+from ..plots.alt import alt_text, describe
 from ..plots.style import BLUE, GREEN, ORANGE, PURPLE, RED, figure, show_png, widget_figure
 from ..models.uncertainty import coverage, draw_ellipse, expected_coverage, monte_carlo, propagate
 from ..plots.style import notebook_setup as setup
@@ -183,7 +184,7 @@ def measurement_explorer(*, landmark=(10.0, 3.0), sigma_xy: float = 0.3,
               f"{math.degrees(s['sigma_bearing']):.2f} deg, correlation {s['correlation']:+.2f}; "
               f"Monte Carlo: sd ratios {s['mc_sd_ratio'][0]:.2f} (range), "
               f"{s['mc_sd_ratio'][1]:.2f} (bearing), {100 * s['mc_coverage']:.1f}% inside 2σ")
-        show_png(views[0].png())
+        show_png(views[0].png(), alt_text(views[0].fig))
 
     slider = dict(continuous_update=False, readout_format=".1f")
     widget = interactive(
@@ -251,7 +252,10 @@ def jacobian_sparsity_figure(H_full, n_landmarks: int, seen: int):
     ax.grid(which="minor", color="0.7")
     ax.tick_params(which="minor", length=0)
     ax.set_title(f"∂h/∂X for a sighting of landmark {seen}: dark = non-zero")
-    return fig
+    nonzero = [labels[c] for c in np.flatnonzero((H > ROUNDING * H.max()).any(axis=0))]
+    return describe(fig, f"A grid of the Jacobian's 2 rows (range, bearing) and {len(labels)} "
+                         f"columns: only the columns {', '.join(nonzero)} are non-zero, every "
+                         f"column of the other {n_landmarks - 1} landmarks is zero")
 
 
 def printed_bearing_figure(landmarks, off, heading: float):

@@ -29,6 +29,7 @@ from ..evaluation.trajectory import trajectory_errors
 from ..plots.slam import (CAR_PARK_LIMITS, plot_consistency, plot_correlation,
                           plot_landmark_zooms, plot_true_vs_mapped, true_path)
 from ..plots.blit import Blit, drawn_by
+from ..plots.alt import describe
 from ..plots.style import BLUE, DPI, FIG_WIDTH, GREEN, ORANGE, PURPLE, RED, figure
 from ..plots.style import notebook_setup as setup
 from ..slam.config import SlamConfig
@@ -368,9 +369,15 @@ def landmark_zooms_figure(result, beacons, map_err):
     k = order.size
     ncols = 8
     fig, axs = figure(-(-k // ncols), ncols, height=1.45 * -(-k // ncols), squeeze=False)
+    half_width, n_sigma = 0.25, 2.0
     plot_landmark_zooms(result.landmarks, result.landmark_cov, beacons,
-                        map_err.i_mapped[order], map_err.j_true[order], axes=axs)
-    return fig
+                        map_err.i_mapped[order], map_err.j_true[order], axes=axs,
+                        half_width=half_width, n_sigma=n_sigma)
+    return describe(fig, f"One panel for each of the {k} mapped surveyed beacons, "
+                         f"{200 * half_width:.0f} cm wide at true scale: the surveyed position "
+                         f"(star), the mapped one (cross) and its {n_sigma:g}-sigma ellipse; "
+                         "each title gives the beacon, the distance between "
+                         "the two and its squared Mahalanobis distance d²")
 
 
 def correlation_figure(runs: dict):
@@ -378,5 +385,9 @@ def correlation_figure(runs: dict):
     fig, axs = figure(1, len(runs), height=5.2)
     for ax, (name, r) in zip(np.atleast_1d(axs), runs.items()):
         plot_correlation(r.covariance, ax=ax, title=f"final state correlation: {name}")
-    return fig
+    sizes = ", ".join(f"{(r.covariance.shape[0] - 3) // 2} landmarks ({name})"
+                      for name, r in runs.items())
+    return describe(fig, "The correlation matrix of the final state, one panel per run "
+                         f"({sizes}): pose x, y, φ first, then each landmark's x and y, "
+                         "coloured from -1 (blue) through 0 (white) to +1 (red)")
 

@@ -23,6 +23,7 @@ from ..evaluation.trajectory import TrajectoryErrors, trajectory_errors
 from ..evaluation.residuals import ROUNDING, bound_text
 from ..models.uncertainty import ellipse_curves
 from ..plots.blit import Blit, drawn_by
+from ..plots.alt import alt_text
 from ..plots.style import BLUE, FIG_WIDTH, GREEN, ORANGE, RED, figure, show_png, widget_figure
 from ..plots.style import notebook_setup as setup
 from ..slam.results import SlamResult
@@ -212,7 +213,7 @@ def run_scrubber(result: SlamResult, gps: Gps, *, start: float | None = None, st
                                                         first_seen=first_seen, outliers=outliers))
             line.set_xdata([float(t), float(t)])
             view.set_moving(moving + [line])
-        show_png(views[0].png())
+        show_png(views[0].png(), alt_text(views[0].fig))
 
     slider = IntSlider(value=start, min=lo, max=hi, step=step, description="t [s]",
                        continuous_update=False)

@@ -19,6 +19,7 @@ from ..ann.evaluation import HiddenSizeGrid, grid_summary
 from ..plots.ann import (performance_limits, performance_moving, plot_landmark_errors,
                          plot_performance, set_performance)
 from ..plots.blit import Blit
+from ..plots.alt import alt_text
 from ..plots.style import PURPLE, RED, figure, show_png, widget_figure
 from ..plots.style import notebook_setup as setup
 
@@ -86,7 +87,7 @@ def hidden_size_explorer(grid: HiddenSizeGrid, *, hidden: int | None = None, see
             view.replace(*set_performance(a0, grid.models[(hidden, seed)]))
             _mark(grid, a1, hidden, seed)
             a1.set_title(title, fontsize=10)
-        show_png(view.png())
+        show_png(view.png(), alt_text(view.fig))
 
     widget = interactive(
         draw,

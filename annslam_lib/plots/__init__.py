@@ -5,6 +5,7 @@
 - ``slam``: Figure 5, landmark zooms, correlations, consistency bands
 - ``ann``: the network's figures (the paper's Figures 6-8)
 - ``blit``: a widget figure whose steps redraw only what moves
+- ``alt``: every figure's alt text (what it shows, for a screen reader)
 """
 
-__all__ = ["style", "data", "slam", "ann", "blit"]
+__all__ = ["style", "data", "slam", "ann", "blit", "alt"]

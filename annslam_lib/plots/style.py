@@ -16,6 +16,8 @@ from cycler import cycler
 import numpy as np
 from matplotlib.figure import Figure
 
+from . import alt
+
 __all__ = ["notebook_setup", "axes", "figure", "widget_figure", "show_widget_figure", "show_png",
            "render_png",
            "layout_signature",
@@ -58,15 +60,19 @@ def show_widget_figure(fig: Figure) -> None:
 
     Explicit display, because no pyplot flush knows about the figure; nothing else can show
     it early from another thread, which is the point (see :func:`widget_figure`)."""
-    show_png(render_png(fig))
+    show_png(render_png(fig), alt.alt_text(fig))
 
 
-def show_png(png: bytes) -> None:
+def show_png(png: bytes, alt_text: str) -> None:
     """Display PNG bytes in the callback's Output (a :class:`plots.blit.Blit` picture, or
-    :func:`render_png`'s)."""
+    :func:`render_png`'s) with their alt text (:func:`plots.alt.alt_text` of the figure
+    drawn), which the output's metadata carries."""
     from IPython.display import Image, display  # only widgets need IPython
 
-    display(Image(data=png, format="png"))
+    if not isinstance(alt_text, str) or len(alt_text) < alt.MIN_LENGTH:
+        raise ValueError(f"show_png needs the picture's alt text (at least {alt.MIN_LENGTH} "
+                         f"characters: what it shows), got {alt_text!r}")
+    display(Image(data=png, format="png", alt=alt_text))
 
 
 #: Axes positions of the widget figures laid out so far, by :func:`layout_signature`.
@@ -182,6 +188,7 @@ def notebook_setup(*, precision: int = 3, linewidth: int = 110) -> None:
         "ytick.labelsize": 9, "legend.framealpha": 0.85, "axes.grid": False,
         "axes.prop_cycle": cycler(color=PALETTE),
     })
+    alt.install()             # every figure shown carries its alt text (plots.alt)
 
 
 def axes(ax=None, figsize=(6, 6)):

@@ -113,11 +113,13 @@ def feedback_page(g) -> str:
     notes = "".join(f"<li>{e(n)}</li>" for n in [*g.notes, *g.errors])
     head = (f"<p><b>Score: {g.score:g} / {g.max_score:g}</b></p>" if g.graded else
             f"<p><b>Not graded</b>: {e(g.reason)}</p>")
-    return ("<!DOCTYPE html>\n<html><head><meta charset='utf-8'><title>"
+    return ("<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>"
+            "<meta name='viewport' content='width=device-width, initial-scale=1'><title>"
             f"{e(g.assignment or '')} feedback</title></head><body>\n"
             f"<h1>{e(g.assignment or '')}: feedback for {e(g.student or '')}</h1>\n{head}\n"
-            "<table border='1'><tr><th>exercise</th><th>points</th><th>status</th>"
-            f"<th>message</th></tr>{rows}</table>\n"
+            "<table border='1'><caption>points per exercise</caption><tr>"
+            "<th scope='col'>exercise</th><th scope='col'>points</th><th scope='col'>status</th>"
+            f"<th scope='col'>message</th></tr>{rows}</table>\n"
             + (f"<ul>{notes}</ul>\n" if notes else "") + "</body></html>\n")
 
 
