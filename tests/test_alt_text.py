@@ -135,3 +135,27 @@ def test_a_kernel_shows_figures_with_alt_text_and_the_same_pixels():
     png = [base64.b64decode(o[0]["data"]["image/png"]) for o in outs if o]
     assert png[0] == png[1] == png[2]
     nbformat.validate(nb)
+
+
+def test_an_html_export_with_the_classic_template_carries_the_alt_text():
+    """INSTRUCTOR.md, Accessibility: `jupyter nbconvert --to html --template classic` writes
+    each stored figure's alt text as its image's alt attribute, in order."""
+    from html.parser import HTMLParser
+
+    import nbformat
+    from nbconvert import HTMLExporter
+
+    path = ROOT / "notebooks" / "01a_kalman_filter.ipynb"
+    nb = nbformat.read(path, as_version=4)
+    body, _ = HTMLExporter(template_name="classic").from_notebook_node(nb)
+    shown = []
+
+    class Images(HTMLParser):
+        def handle_starttag(self, tag, attrs):
+            if tag == "img":
+                shown.append(dict(attrs).get("alt"))
+
+    Images().feed(body)
+    stored = [o.metadata["image/png"]["alt"] for c in nb.cells if c.cell_type == "code"
+              for o in c.outputs if "image/png" in o.get("data", {})]
+    assert len(stored) >= 4 and shown == stored

@@ -133,7 +133,6 @@ def test_durations(car_park, victoria_park):
 
 
 def test_loading_is_cached_and_read_only(car_park, victoria_park):
-    # (parse times are in benchmarks/bench_course.py)
     assert loaders.load("car_park") is car_park and loaders.load_victoria_park() is victoria_park
     with pytest.raises(ValueError, match="read-only"):
         car_park.odometry.speed[0] = 1.0

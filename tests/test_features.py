@@ -217,7 +217,6 @@ def test_car_park_scans_with_a_beacon_are_the_bright_ones_less_window_and_edges(
 
 
 def test_extraction_is_deterministic(car_park):
-    # (its time is in benchmarks/bench_course.py)
     a, b = beacons.extract_beacons(car_park.laser), beacons.extract_beacons(car_park.laser)
     assert np.array_equal(a.range, b.range) and np.array_equal(a.bearing, b.bearing)
     assert np.array_equal(a.offsets, b.offsets) and a.count > 850

@@ -341,7 +341,7 @@ def test_bad_beacons_and_config_type():
 
 
 def test_dataset_shape():
-    ds = simulate()                           # (its time is in benchmarks/bench_course.py)
+    ds = simulate()
     assert ds.name == "simulated" and ds.landmark_kind == "beacons"
     assert ds.truth.poses.shape == (len(ds.odometry), 4)
     assert np.array_equal(ds.truth.landmarks, ds.beacons) and ds.beacons.shape == (15, 2)

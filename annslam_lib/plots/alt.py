@@ -1,8 +1,8 @@
 """Alt text: what every figure of the course says to a reader who cannot see it.
 
 A figure shown in a notebook is a PNG; a screen reader reads its ``alt`` attribute, which
-nbconvert, myst-nb and the course's own pages take from the output's metadata
-(``{"image/png": {"alt": ...}}``, the convention of IPython's ``Image(alt=...)``). Every
+an HTML export takes from the output's metadata (``{"image/png": {"alt": ...}}``, the
+convention of IPython's ``Image(alt=...)``; nbconvert's classic template writes it). Every
 figure gets one from :func:`alt_text`: the figure's message when its maker stated one with
 :func:`describe` (what the reader should see in it), followed by what the figure holds, read
 from the figure itself (title, panels, axes and their scales, the legend's series), so the
