@@ -243,7 +243,8 @@ def jacobian_sparsity_figure(H_full, n_landmarks: int, seen: int):
     (d range / d phi computes to 0 or to 1e-17, depending on the CPU): drawn as zero."""
     H = np.abs(np.asarray(H_full, dtype=float))
     fig, ax = figure(height=2.4)
-    ax.imshow(H > ROUNDING * H.max(), cmap="Greys", vmin=0, vmax=1.6, aspect="equal")
+    nonzero = H > ROUNDING * H.max()
+    ax.imshow(nonzero, cmap="Greys", vmin=0, vmax=1.6, aspect="equal")
     labels = ["x", "y", "φ"] + [f"{c}{k}" for k in range(1, n_landmarks + 1) for c in ("x", "y")]
     ax.set_xticks(range(len(labels)), labels)
     ax.set_yticks([0, 1], ["range", "bearing"])
@@ -252,9 +253,9 @@ def jacobian_sparsity_figure(H_full, n_landmarks: int, seen: int):
     ax.grid(which="minor", color="0.7")
     ax.tick_params(which="minor", length=0)
     ax.set_title(f"∂h/∂X for a sighting of landmark {seen}: dark = non-zero")
-    nonzero = [labels[c] for c in np.flatnonzero((H > ROUNDING * H.max()).any(axis=0))]
+    columns = [labels[c] for c in np.flatnonzero(nonzero.any(axis=0))]
     return describe(fig, f"A grid of the Jacobian's 2 rows (range, bearing) and {len(labels)} "
-                         f"columns: only the columns {', '.join(nonzero)} are non-zero, every "
+                         f"columns: only the columns {', '.join(columns)} are non-zero, every "
                          f"column of the other {n_landmarks - 1} landmarks is zero")
 
 

@@ -104,8 +104,8 @@ def _content(ax) -> str:
     return "; ".join(bits)
 
 
-def _panel(ax) -> str:
-    title, body = _title(ax), _content(ax)
+def _panel(title: str, body: str) -> str:
+    """A panel in words from its title and :func:`_content`."""
     if title and body:
         return f'"{title}": {body}'
     return f'"{title}"' if title else body
@@ -141,7 +141,7 @@ def alt_text(fig: Figure) -> str:
     axes = _drawn_axes(fig)
     contents = [_content(ax) for ax in axes]
     titles = [_title(ax) for ax in axes]
-    panels = [p for p in (_panel(ax) for ax in axes) if p]
+    panels = [p for p in map(_panel, titles, contents) if p]
     if len(axes) > 2 and contents[0] and len(set(contents)) == 1 and all(titles):
         # small multiples: the same axes and series, one panel per case
         what = (f"Figure of {len(axes)} panels{named}, each {contents[0]}, titled "
