@@ -7,6 +7,7 @@
 #   ./course.sh setup               only set up (venv, CPU torch, packages, data)
 #   ./course.sh refresh [NB...]     re-execute notebooks in place (instructors)
 #   ./course.sh release [...]       write the student versions (no solutions, no hidden tests)
+#   ./course.sh site [--out DIR ...]  build the course's website (instructors; INSTRUCTOR.md)
 #   ./course.sh grade SUB...        grade submitted notebooks (instructors)
 #   ./course.sh hub --class FILE [--port P]   a JupyterHub for a class, as root (INSTRUCTOR.md)
 #   ./course.sh class ACTION CHAPTER          release|collect|grade|feedback on that hub
@@ -103,6 +104,10 @@ case "$cmd" in
         setup
         "$VPY" -m annslam_lib release "$@"
         ;;
+    site)
+        setup environment-instructor.txt
+        "$VPY" -m annslam_lib site "$@"
+        ;;
     grade)
         setup
         grader_bytecode
@@ -118,7 +123,7 @@ case "$cmd" in
         exec "$VPY" -m annslam_lib class "$@"
         ;;
     *)
-        echo "usage: ./course.sh [lab [--instructor]|test|setup|refresh|release|grade|hub|class]" >&2
+        echo "usage: ./course.sh [lab [--instructor]|test|setup|refresh|release|site|grade|hub|class]" >&2
         exit 2
         ;;
 esac

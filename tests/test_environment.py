@@ -40,7 +40,9 @@ def test_every_requirement_is_pinned_and_installed_at_that_version():
 def test_instructor_extras_are_pinned_and_if_installed_at_that_version():
     pins = _pins("environment-instructor.txt")
     assert set(pins) == {"nbgrader", "playwright", "evo", "pytest-timeout",
-                         "jupyter-repo2docker", "pyyaml", "jsonschema", "towncrier"}
+                         "jupyter-repo2docker", "pyyaml", "jsonschema", "towncrier", "sphinx",
+                         "myst-nb", "sphinx-book-theme", "sphinx-mathjax-offline",
+                         "axe-playwright-python"}
     for name, version in pins.items():
         try:
             installed = metadata.version(name)

@@ -1,6 +1,9 @@
 """Course layer: what instructors and students run around the notebooks.
 
 - ``release``: the student versions (nbgrader's format), their checks for leaks
+- ``site``: the course as a static website, read from the stored outputs
+- ``site_render``: the website's notebook renderer (pictures keep their alt text)
+- ``launch``: links that open a chapter on a JupyterHub (nbgitpuller), Binder or Colab
 - ``workspace``: a student's own copy of the course, never overwritten
 - ``pacing``: how long each chapter takes a student, estimated from the notebooks
 - ``grader``: scores from the instructor's notebook, decided outside the student's code
@@ -22,6 +25,6 @@
 - ``cli``: ``python -m annslam_lib ...``
 """
 
-__all__ = ["release", "workspace", "pacing", "grader", "plan", "similarity", "integrity",
+__all__ = ["release", "site", "site_render", "launch", "workspace", "pacing", "grader", "plan", "similarity", "integrity",
            "sandbox", "cgroup", "confine", "codec", "kernel_side", "kernels", "warm", "hub",
            "cli"]

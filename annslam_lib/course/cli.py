@@ -239,6 +239,43 @@ def _add_release(sub) -> None:
     p.set_defaults(func=_release)
 
 
+def _site(args: argparse.Namespace) -> int:
+    from .launch import LaunchTargets
+    from .site import build
+
+    try:
+        targets = LaunchTargets(release_repo=args.release_repo, release_ref=args.release_ref,
+                                hub=args.hub, course_repo=args.course_repo,
+                                course_ref=args.course_ref)
+        if targets.release_repo is None and (targets.hub or targets.course_repo):
+            raise ValueError("the launch links open the student release: name it with "
+                             "--release-repo")
+        report = build(args.out, targets=targets, quiet=not args.verbose)
+    except (ValueError, RuntimeError) as e:
+        print(f"annslam site: {e}", file=sys.stderr)
+        return 2
+    print(f"== {report.summary()}; open {report.out / 'index.html'}")
+    return 0
+
+
+def _add_site(sub) -> None:
+    p = sub.add_parser("site", help="build the course's static website (every chapter from its "
+                       "stored outputs, the guides, search, math; no request to another host)",
+                       description="Launch links are added for what is named: the student "
+                       "release (a git repository or branch of `release`'s output) with the "
+                       "class hub (nbgitpuller), Binder (built from the course repository's "
+                       "binder/) and Colab.")
+    p.add_argument("--out", default="site", metavar="DIR", help="output folder (default ./site)")
+    p.add_argument("--release-repo", metavar="URL", help="the published student release (https)")
+    p.add_argument("--release-ref", default="main", metavar="REF", help="its branch or tag")
+    p.add_argument("--hub", metavar="URL", help="the class hub's address (nbgitpuller links)")
+    p.add_argument("--course-repo", metavar="URL",
+                   help="this course's repository (Binder's environment, Colab's library)")
+    p.add_argument("--course-ref", default="main", metavar="REF", help="its branch or tag")
+    p.add_argument("--verbose", action="store_true", help="show Sphinx's progress")
+    p.set_defaults(func=_site)
+
+
 def _grade(args: argparse.Namespace) -> int:
     from .grader import GradingEnvironmentError, grade_batch
     from .sandbox import NO_SANDBOX_WARNING, Limits
@@ -507,6 +544,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_reproduce(sub)
     _add_compare(sub)
     _add_release(sub)
+    _add_site(sub)
     _add_grade(sub)
     _add_exercises(sub)
     _add_pacing(sub)

@@ -1,0 +1,450 @@
+"""The course website (annslam_lib.course.site): built for real from the stored notebooks,
+read as HTML, then served on 127.0.0.1 and opened page by page in headless Chromium with
+every request to another host aborted, and checked by axe-core against WCAG 2.1 A and AA."""
+from __future__ import annotations
+
+import functools
+import html.parser
+import http.server
+import re
+import threading
+from pathlib import Path
+from types import SimpleNamespace
+from urllib.parse import parse_qs, unquote, urlsplit
+
+import nbformat
+import pytest
+
+from annslam_lib.course import launch, site
+from annslam_lib.course.release import hidden_test_lines, solution_lines, ANSWER_TAG
+from annslam_lib.plots import alt
+
+pytest.importorskip("sphinx", reason="the site's tools are not installed: pip install -r "
+                    "environment-instructor.txt (./course.sh test does)")
+pytest.importorskip("myst_nb", reason="myst-nb is not installed (environment-instructor.txt)")
+
+REPO = Path(__file__).resolve().parents[1]
+NOTEBOOKS = sorted((REPO / "notebooks").glob("*.ipynb"))
+TARGETS = launch.LaunchTargets(
+    release_repo="https://github.com/example-course/annslam-release", release_ref="fall-2027",
+    hub="https://hub.example.edu", course_repo="https://github.com/example-course/annslam",
+    course_ref="v0.1.0")
+SERIOUS = ("serious", "critical")
+WCAG_TAGS = ["wcag2a", "wcag2aa", "wcag21a", "wcag21aa"]
+
+
+class _Page(html.parser.HTMLParser):
+    """What a page holds: its tags' attributes by tag, its ids, its text, and the text of its
+    code blocks (``<pre>``)."""
+
+    def __init__(self):
+        super().__init__()
+        self.tags: list[tuple[str, dict]] = []
+        self.ids: set[str] = set()
+        self.text: list[str] = []
+        self.code: list[str] = []
+        self._pre = 0
+
+    def handle_starttag(self, tag, attrs):
+        a = dict(attrs)
+        self.tags.append((tag, a))
+        if a.get("id"):
+            self.ids.add(a["id"])
+        self._pre += tag == "pre"
+
+    def handle_endtag(self, tag):
+        if tag == "pre":
+            self._pre -= 1
+            self.code.append("\n")
+
+    def handle_data(self, data):
+        self.text.append(data)
+        if self._pre:
+            self.code.append(data)
+
+
+@functools.lru_cache(maxsize=None)
+def _parse(path: Path) -> _Page:
+    p = _Page()
+    p.feed(path.read_text())
+    return p
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    out = tmp_path_factory.mktemp("site") / "html"
+    report = site.build(out, targets=TARGETS)
+    return report
+
+
+def _pages(root: Path) -> list[Path]:
+    return site.html_pages(root)
+
+
+def test_the_site_holds_every_chapter_and_guide(built):
+    root = built.out
+    assert [stem for stem, _ in built.chapters] == [p.stem for p in NOTEBOOKS]
+    for p in NOTEBOOKS:
+        page = root / "notebooks" / f"{p.stem}.html"
+        assert page.is_file(), f"{p.name}: no page"
+        title = dict(built.chapters)[p.stem]
+        assert title in "".join(_parse(page).text), f"{p.name}: its title {title!r} is not shown"
+    for rel, _ in site.PAGES:
+        assert (root / rel.replace(".md", ".html")).is_file(), f"{rel}: no page"
+    assert (root / "search.html").is_file() and (root / "searchindex.js").is_file()
+    assert (root / "_static" / "mathjax" / "tex-chtml.js").is_file()
+    index = "".join(_parse(root / "index.html").text)
+    assert "The two commands" in index                # the README is the front page
+    assert built.pages == len(_pages(root)) - 2       # genindex and search are not pages
+    assert 0 < built.size_mb < 40
+
+
+def test_a_build_leaves_only_its_folder_and_never_replaces_one_it_did_not_make(built, tmp_path):
+    assert sorted(p.name for p in built.out.parent.iterdir()) == ["html"]   # no staging left
+    assert (built.out / site.MARKER).is_file()
+    mine = tmp_path / "notes"
+    mine.mkdir()
+    (mine / "lecture.txt").write_text("my notes")
+    with pytest.raises(ValueError, match="not a site built here"):
+        site.build(mine, notebooks=NOTEBOOKS[:1])
+    assert (mine / "lecture.txt").read_text() == "my notes"
+    with pytest.raises(ValueError, match="no chapter"):
+        site.build(tmp_path / "empty", notebooks=[])
+
+
+def _is_local(url: str) -> bool:
+    s = urlsplit(url)
+    return not s.scheme and not s.netloc or s.scheme == "data"
+
+
+def test_no_page_loads_anything_from_another_host(built):
+    """Scripts, styles, fonts, pictures and frames: every one is the site's own. Links a
+    reader follows (launch buttons, references) may lead elsewhere; nothing is loaded."""
+    loads = []
+    for page in _pages(built.out):
+        for tag, a in _parse(page).tags:
+            for key in ("src", "srcset", "data-src", "poster"):
+                if a.get(key) and not _is_local(a[key]):
+                    loads.append((page.name, tag, a[key]))
+            if tag == "link" and a.get("href") and not _is_local(a["href"]) and \
+                    a.get("rel", "") not in ("canonical",):
+                loads.append((page.name, tag, a["href"]))
+    for css in built.out.rglob("*.css"):
+        for url in re.findall(r"url\(\s*['\"]?([^'\")]+)", css.read_text(errors="replace")):
+            if not _is_local(url):
+                loads.append((css.name, "css", url))
+    assert loads == []
+
+
+def _figures(nb) -> list[str]:
+    """The alt text of every picture a page of ``nb`` shows, in order."""
+    return [o["metadata"]["image/png"]["alt"] for c in nb.cells if c.cell_type == "code"
+            for o in c.get("outputs", []) if "image/png" in o.get("data", {})]
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
+def test_every_stored_figure_is_on_its_page_with_its_alt_text(built, path):
+    nb = nbformat.read(path, as_version=4)
+    expected = _figures(site.site_notebook(nb, path.name))
+    # independently of the page version: the instructor's figures, but those of the
+    # exercises' cells, and each widget's saved picture in place of the widget
+    own = []
+    for c in nb.cells:
+        meta = c.get("metadata", {}).get("nbgrader", {})
+        if c.cell_type != "code" or meta.get("solution") or meta.get("grade"):
+            continue
+        for o in c.get("outputs", []):
+            view = o.get("data", {}).get("application/vnd.jupyter.widget-view+json")
+            if view:
+                own += _figures(nbformat.from_dict({"cells": [{"cell_type": "code", "outputs":
+                                site.widget_pictures(site._state(nb), view["model_id"])}]}))
+            elif "image/png" in o.get("data", {}):
+                own.append(o["metadata"]["image/png"]["alt"])
+    assert expected == own
+    page = _parse(built.out / "notebooks" / f"{path.stem}.html")
+    shown = [a.get("alt") for tag, a in page.tags
+             if tag == "img" and "_images/" in a.get("src", "")]
+    assert shown == expected, f"{path.name}: {len(shown)} pictures shown, {len(expected)} stored"
+    assert all(len(a) >= alt.MIN_LENGTH for a in shown)
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
+def test_no_solution_hidden_test_or_written_answer_reaches_a_page(built, path):
+    nb = nbformat.read(path, as_version=4)
+    parsed = _parse(built.out / "notebooks" / f"{path.stem}.html")
+    text = "".join(parsed.text)
+    shown = {line.strip() for line in "".join(parsed.code).split("\n")}   # the code cells
+    leaked = (solution_lines(nb) | hidden_test_lines(nb)) & shown
+    assert not leaked, f"{path.name}: {sorted(leaked)[:5]}"
+    assert "BEGIN SOLUTION" not in text and "BEGIN HIDDEN TESTS" not in text
+    for c in nb.cells:
+        if c.cell_type == "markdown" and ANSWER_TAG in c.metadata.get("tags", []):
+            words = " ".join(c.source.split())[:80]
+            assert words not in " ".join(text.split()), f"{path.name}: a written answer shows"
+
+
+def test_every_internal_link_leads_to_a_page_and_its_anchor(built):
+    broken = []
+    for page in _pages(built.out):
+        for tag, a in _parse(page).tags:
+            href = a.get("href")
+            if tag != "a" or not href or urlsplit(href).scheme or href.startswith("//"):
+                continue
+            path, _, anchor = href.partition("#")
+            target = (page.parent / unquote(path)).resolve() if path else page
+            if target.is_dir():
+                target = target / "index.html"
+            if not target.is_file():
+                broken.append((page.relative_to(built.out).as_posix(), href))
+            elif anchor and target.suffix == ".html" and unquote(anchor) not in _parse(target).ids:
+                broken.append((page.relative_to(built.out).as_posix(), href))
+    assert broken == []
+
+
+def test_a_widget_shows_its_saved_picture_and_names_its_controls(built):
+    page = _parse(built.out / "notebooks" / "00_course_map.html")
+    notes = [t for t in page.text if "interactive" in t and "scan = 150" in t]
+    assert notes and "(from 0 to 585)" in notes[0]
+
+
+def _query(url: str) -> dict:
+    return {k: v[0] for k, v in parse_qs(urlsplit(url).query).items()}
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
+def test_each_chapter_has_its_launch_links(built, path):
+    page = _parse(built.out / "notebooks" / f"{path.stem}.html")
+    hrefs = [a["href"] for tag, a in page.tags if tag == "a" and a.get("href", "").startswith("https://")]
+    hub = [h for h in hrefs if h.startswith("https://hub.example.edu/")]
+    assert len(hub) == 1
+    assert urlsplit(hub[0]).path == "/hub/user-redirect/git-pull"
+    assert _query(hub[0]) == {"repo": TARGETS.release_repo, "branch": "fall-2027",
+                              "urlpath": f"lab/tree/annslam/{path.name}", "targetpath": "annslam"}
+    binder = [h for h in hrefs if h.startswith("https://mybinder.org/")]
+    assert len(binder) == 1
+    assert urlsplit(binder[0]).path == "/v2/gh/example-course/annslam/v0.1.0"
+    pull = _query(binder[0])["urlpath"]
+    assert pull.startswith("git-pull?") and _query("x:/?" + pull.split("?", 1)[1]) == \
+        _query(hub[0])
+    colab = [h for h in hrefs if h.startswith("https://colab.research.google.com/")]
+    text = " ".join("".join(page.text).split()).replace("\u2019", "'")   # Sphinx's smart quotes
+    if path.stem in launch.NOT_ON_COLAB:
+        assert colab == [] and f"Not on Colab: {launch.NOT_ON_COLAB[path.stem]}" in text
+    else:
+        assert colab == [f"https://colab.research.google.com/github/example-course/"
+                         f"annslam-release/blob/fall-2027/{path.name}"]
+        assert 'pip install "annslam @ git+https://github.com/example-course/annslam@v0.1.0"' \
+            in text
+
+
+def test_launch_links_refuse_what_is_not_an_address_a_ref_or_a_chapter():
+    ok = ("https://hub.example.edu", "https://github.com/a/b", "main", "05_ekf_slam.ipynb")
+    assert launch.nbgitpuller_link(*ok).startswith("https://hub.example.edu/hub/user-redirect/")
+    for hub in ("javascript:alert(1)", "hub.example.edu", "https://hub.example.edu/?x=1",
+                "ftp://hub.example.edu"):
+        with pytest.raises(ValueError, match="address"):
+            launch.nbgitpuller_link(hub, *ok[1:])
+    for ref in ("main branch", "../main", "main;rm", ""):
+        with pytest.raises(ValueError, match="branch or tag"):
+            launch.nbgitpuller_link(ok[0], ok[1], ref, ok[3])
+    for nb in ("../secret.ipynb", "a/b.ipynb", "notes.txt"):
+        with pytest.raises(ValueError, match="file name"):
+            launch.nbgitpuller_link(*ok[:3], nb)
+    # Colab opens GitHub only; Binder takes any git host by its encoded address
+    assert launch.colab_link("https://git.example.edu/a/b", "main", "05_ekf_slam.ipynb") is None
+    b = launch.binder_link("https://git.example.edu/a/b", "v1", "https://git.example.edu/a/r",
+                           "main", "05_ekf_slam.ipynb")
+    assert urlsplit(b).path == "/v2/git/https%3A%2F%2Fgit.example.edu%2Fa%2Fb/v1"
+    assert launch.links(launch.LaunchTargets(), "05_ekf_slam.ipynb") == []
+    with pytest.raises(ValueError):
+        launch.LaunchTargets(release_repo="file:///srv/release")
+
+
+# --- in the browser --------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def served(built):
+    class Quiet(http.server.SimpleHTTPRequestHandler):
+        def log_message(self, *args):
+            pass
+
+    server = http.server.ThreadingHTTPServer(
+        ("127.0.0.1", 0), functools.partial(Quiet, directory=str(built.out)))
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    yield f"http://127.0.0.1:{server.server_address[1]}"
+    server.shutdown()
+    server.server_close()
+
+
+@pytest.fixture(scope="module")
+def page():
+    from browser_support import why_no_browser
+
+    reason = why_no_browser()
+    if reason:
+        pytest.skip(reason)
+    from browser_support import CHROMIUM_ARGS, chromium_path
+    from playwright.sync_api import sync_playwright
+
+    pw = sync_playwright().start()
+    browser = pw.chromium.launch(executable_path=chromium_path(), args=CHROMIUM_ARGS + [
+        "--host-resolver-rules=MAP * ~NOTFOUND, EXCLUDE 127.0.0.1"])
+    ctx = browser.new_context(viewport={"width": 1280, "height": 900})
+    yield ctx.new_page()
+    ctx.close()
+    browser.close()
+    pw.stop()
+
+
+#: The code cells' highlighted text: half of axe's time on a chapter's page (every token a
+#: node whose contrast it computes). Their colours are one palette, checked whole by
+#: test_the_code_highlighting_palette_has_aa_contrast_in_both_modes, and axe checks them on
+#: the pages of FULL_AXE.
+CODE = ".highlight"
+FULL_AXE = ["notebooks/05a_diagnose_the_filter.html", "notebooks/09_capstone.html"]
+
+
+def _axe(page, exclude=()) -> list[dict]:
+    import axe_playwright_python
+
+    # colours still changing (the theme's 0.15 s transitions as the mode applies) are no
+    # page's colours: wait for every transition to end
+    page.wait_for_function("document.getAnimations().every(a => a.playState !== 'running')")
+    if not page.evaluate("typeof axe !== 'undefined'"):
+        page.evaluate((Path(axe_playwright_python.__file__).parent / "axe.min.js").read_text())
+    res = page.evaluate("([tags, exclude]) => axe.run(exclude.length ? {exclude: exclude.map(s => [s])}"
+                        " : document, {runOnly: {type: 'tag', values: tags}, resultTypes: "
+                        "['violations']})", [WCAG_TAGS, list(exclude)])
+    return res["violations"]
+
+
+def _serious(violations) -> list[str]:
+    return [f"{v['id']} ({v['impact']}, {len(v['nodes'])}x): {v['nodes'][0]['target']}"
+            for v in violations if v["impact"] in SERIOUS]
+
+
+def test_every_page_opens_offline_renders_its_math_and_passes_wcag_21_aa(built, served, page):
+    """Every page: nothing requested from another host (the browser resolves none; each
+    such request would be counted), no failed request, no console error, every formula
+    typeset by the site's own MathJax, and no serious or critical axe-core violation of
+    WCAG 2.1 A/AA."""
+    elsewhere, failed, errors, loading = [], [], [], [True]
+
+    def note(bucket, item):
+        if loading[0]:            # axe fetches the stylesheets again itself, resolving the
+            bucket.append(item)   # theme's @import against the page: not the page's requests
+    page.on("request", lambda r: None if r.url.startswith((served, "data:"))
+            else elsewhere.append(r.url))
+    page.on("requestfailed", lambda r: note(failed, r.url))
+    page.on("response", lambda r: note(failed, f"{r.status} {r.url}") if r.status >= 400 else None)
+    page.on("console", lambda m: note(errors, m.text) if m.type == "error" else None)
+    page.on("pageerror", lambda e: note(errors, str(e)))
+    report = {}
+    for path in _pages(built.out):
+        rel = path.relative_to(built.out).as_posix()
+        loading[0] = True
+        page.goto(f"{served}/{rel}", wait_until="load")
+        maths = page.evaluate("document.querySelectorAll('.math').length")
+        if maths:
+            page.wait_for_function("n => document.querySelectorAll('.math mjx-container')"
+                                   ".length >= n", arg=maths, timeout=60_000)
+        loading[0] = False
+        report[rel] = _serious(_axe(page, () if rel in FULL_AXE else (CODE,)))
+    assert elsewhere == [] and failed == [] and errors == []
+    assert {k: v for k, v in report.items() if v} == {}
+
+
+def test_the_dark_mode_passes_wcag_21_aa_too(served, page):
+    """The theme follows the reader's colour scheme: the front page and a chapter in dark."""
+    page.emulate_media(color_scheme="dark")
+    try:
+        for rel in ["index.html", FULL_AXE[0]]:
+            page.goto(f"{served}/{rel}", wait_until="load")
+            assert page.evaluate("document.documentElement.dataset.theme") == "dark"
+            assert _serious(_axe(page)) == [], rel
+    finally:
+        page.emulate_media(color_scheme="light")
+
+
+def _luminance(hex_colour: str) -> float:
+    rgb = [int(hex_colour[i:i + 2], 16) / 255 for i in (1, 3, 5)]
+    lin = [c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4 for c in rgb]
+    return 0.2126 * lin[0] + 0.7152 * lin[1] + 0.0722 * lin[2]
+
+
+def contrast(a: str, b: str) -> float:
+    """WCAG 2.1's contrast ratio of two #rrggbb colours."""
+    la, lb = sorted((_luminance(a), _luminance(b)), reverse=True)
+    return (la + 0.05) / (lb + 0.05)
+
+
+def test_the_code_highlighting_palette_has_aa_contrast_in_both_modes(built):
+    """Every token colour of the code cells against the code background, in the light and
+    the dark theme: at least 4.5:1 (WCAG 2.1 AA for text)."""
+    assert round(contrast("#777777", "#ffffff"), 2) == 4.48      # the formula, on a known pair
+    css = (built.out / "_static" / "pygments.css").read_text()
+    low = {}
+    for mode in ("light", "dark"):
+        rules = re.findall(rf'html\[data-theme="{mode}"\] \.highlight( \.[\w-]+)? \{{([^}}]*)\}}', css)
+        background = [re.search(r"background(?:-color)?:\s*(#[0-9a-fA-F]{6})", body).group(1)
+                      for cls, body in rules if not cls and "background" in body]
+        assert len(background) == 1, mode
+        colours = {cls.strip(): m.group(1) for cls, body in rules
+                   if (m := re.search(r"(?<!-)color:\s*(#[0-9a-fA-F]{6})", body))}
+        assert len(colours) > 20, f"{mode}: {len(colours)} token colours found"
+        low |= {f"{mode} {cls}": round(contrast(c, background[0]), 2)
+                for cls, c in colours.items() if contrast(c, background[0]) < 4.5}
+    assert low == {}
+
+
+def test_the_wcag_gate_fails_a_page_with_planted_defects(served, page):
+    """The gate can fail: a picture without alt text, grey text on white at 1.6:1, a control
+    without a name, each reported serious or critical on a page of the site."""
+    page.goto(f"{served}/index.html", wait_until="load")
+    page.evaluate("""() => {
+        const m = document.querySelector('main') || document.body;
+        m.insertAdjacentHTML('beforeend', '<img src="_static/annslam.css">'
+          + '<p style="color:#ccc;background:#fff">faint words</p><button></button>');
+    }""")
+    found = {v["id"] for v in _axe(page) if v["impact"] in SERIOUS}
+    assert {"image-alt", "color-contrast", "button-name"} <= found
+
+
+def test_a_feedback_page_passes_wcag_21_aa(page):
+    from annslam_lib.course.hub.classroom import feedback_page
+
+    g = SimpleNamespace(
+        graded=True, score=4, max_score=6, reason="", assignment="05_ekf_slam", student="ada",
+        notes=["exercise 5.3 was graded on hidden runs"], errors=[],
+        exercises=[SimpleNamespace(grade_id="ex5_1", points=2, max_points=2, status="passed",
+                                   message="ok"),
+                   SimpleNamespace(grade_id="ex5_3", points=2, max_points=4, status="failed",
+                                   message="the gain ignores the landmark's covariance")])
+    page.set_content(feedback_page(g))
+    assert _serious(_axe(page)) == []
+
+
+def test_keyboard_focus_is_visible_on_every_control_of_a_chapter(served, page):
+    """Tab through the first 40 stops of a chapter page: each focused element shows a focus
+    ring (an outline or a box shadow), none is hidden."""
+    page.goto(f"{served}/notebooks/05_ekf_slam.html", wait_until="load")
+    page.evaluate("document.activeElement && document.activeElement.blur()")
+    seen, invisible = 0, []
+    for _ in range(40):
+        page.keyboard.press("Tab")
+        info = page.evaluate("""() => {
+            const e = document.activeElement;
+            if (!e || e === document.body) return null;
+            const s = getComputedStyle(e);
+            const r = e.getBoundingClientRect();
+            return {tag: e.tagName, text: (e.innerText || e.getAttribute('aria-label') || '').slice(0, 40),
+                    ring: (s.outlineStyle !== 'none' && parseFloat(s.outlineWidth) > 0)
+                          || (s.boxShadow && s.boxShadow !== 'none'),
+                    shown: r.width > 0 && r.height > 0};
+        }""")
+        if info is None:
+            continue
+        seen += 1
+        if not (info["ring"] and info["shown"]):
+            invisible.append(info)
+    assert seen >= 20 and invisible == []
