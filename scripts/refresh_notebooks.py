@@ -6,12 +6,14 @@
 Use ./course.sh refresh, which fixes the BLAS thread count first: stored outputs
 are compared digit for digit by strict nbval.
 """
+import json
 import sys
 from pathlib import Path
 
 import nbformat
 
 from annslam_lib.course import kernels
+from annslam_lib.plots import frames
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -22,7 +24,23 @@ def refresh(path: Path) -> float:
         if cell.cell_type == "code":
             cell.outputs, cell.execution_count = [], None
             cell.metadata.pop("execution", None)
+    # the widgets marked for the website's animations: their frames are captured in the
+    # notebook's own kernel after Run All, by cells added at the end and removed again
+    marked = [c for c in nb.cells if c.cell_type == "code"
+              and "animate" in c.metadata.get("annslam", {})]
+    for cell in marked:
+        cell.metadata["annslam"].pop("frames", None)
+        control = cell.metadata["annslam"]["animate"]["control"]
+        nb.cells.append(nbformat.v4.new_code_cell(
+            "from annslam_lib.plots import frames as _frames\n"
+            f"_frames.emit(In, Out, {cell.source!r}, {control!r})"))
     seconds = kernels.run_notebook(nb, path.parent, timeout=900)
+    added = nb.cells[len(nb.cells) - len(marked):]
+    del nb.cells[len(nb.cells) - len(marked):]
+    for cell, extra in zip(marked, added):
+        text = "".join(o.get("text", "") for o in extra.outputs if o.output_type == "stream")
+        line = next(x for x in text.splitlines() if x.startswith(frames.MARKER))
+        cell.metadata["annslam"]["frames"] = json.loads(line[len(frames.MARKER):])["frames"]
     nbformat.write(nb, path)
     return seconds
 

@@ -29,8 +29,8 @@ from ..evaluation.trajectory import trajectory_errors
 from ..plots.slam import (CAR_PARK_LIMITS, plot_consistency, plot_correlation,
                           plot_landmark_zooms, plot_true_vs_mapped, true_path)
 from ..plots.blit import Blit, drawn_by
-from ..plots.alt import describe
-from ..plots.style import BLUE, DPI, FIG_WIDTH, GREEN, ORANGE, PURPLE, RED, figure
+from ..plots.alt import alt_text, describe
+from ..plots.style import BLUE, DPI, FIG_WIDTH, GREEN, ORANGE, PURPLE, RED, figure, show_in_image
 from ..plots.style import notebook_setup as setup
 from ..slam.config import SlamConfig
 from ..slam.runner import initial_pose, run
@@ -297,7 +297,7 @@ def slam_explorer(dataset: Dataset, config: SlamConfig | None = None, *,
             view[:] = [_view(s, ext, limits, ellipse_scale, t_range)]
         else:
             _step(view[0], s, ellipse_scale)
-        image.value = view[0].png()
+        show_in_image(image, view[0].png(), alt_text(view[0].fig))
         text.value = f"<pre>{html.escape(holder['text'])}</pre>"
 
     for w in sliders:

@@ -26,7 +26,8 @@ from ..plots.blit import Blit
 from ..paper.figures import (plot_pose_trace, plot_r_scale, plot_transfer, r_scale_moving,
                             r_scale_trace_limits, set_r_scale)
 from ..plots.slam import CAR_PARK_LIMITS, plot_true_vs_mapped
-from ..plots.style import BLUE, DPI, FIG_WIDTH, RED, figure
+from ..plots.alt import alt_text
+from ..plots.style import BLUE, DPI, FIG_WIDTH, RED, figure, show_in_image
 from ..plots.style import notebook_setup as setup
 from ..slam.config import SlamConfig
 
@@ -176,7 +177,7 @@ def r_scale_explorer(dataset: Dataset | None = None, *, sweep: dict | None = Non
         holder["summary"] = sweep[k]
         holder["text"] = _line(sweep[k], reference)
         view.replace(*set_r_scale(view.fig, sweep, k))
-        image.value = view.png()
+        show_in_image(image, view.png(), alt_text(view.fig))
         text.value = f"<pre>{html.escape(holder['text'])}</pre>"
 
     slider.observe(update, names="value")

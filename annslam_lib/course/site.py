@@ -9,7 +9,9 @@ What a chapter's page shows is the student's version (:func:`release.student_ver
 solution, no hidden test, no written answer) with the instructor notebook's stored outputs
 on every cell the release leaves unchanged; the exercise cells show their stubs and no
 output. A widget cannot run without a kernel: its page shows the picture it stored, with its
-alt text, and a line naming its controls. Everything a page loads (scripts, styles, fonts,
+alt text, and a line naming its controls, then (for a chapter's main widget) an animation
+of the frames the refresh stored (:mod:`annslam_lib.plots.frames`), played by a small
+script of the site's own. Everything a page loads (scripts, styles, fonts,
 MathJax, pictures) is served by the site itself; the only links to other hosts are the
 launch links (:mod:`launch`) a reader follows on purpose.
 
@@ -20,6 +22,8 @@ from __future__ import annotations
 
 import copy
 import html
+import json
+import posixpath
 import re
 import shutil
 import subprocess
@@ -34,8 +38,8 @@ from .launch import LaunchTargets, links
 from .plan import cell_meta
 from .release import read_notebook, student_version
 
-__all__ = ["SiteReport", "build", "site_notebook", "widget_pictures", "html_pages", "mathjax_folder",
-           "PAGES", "WIDGET_NOTE_CLASS"]
+__all__ = ["SiteReport", "build", "site_notebook", "widget_pictures", "player", "frame_files",
+           "html_pages", "mathjax_folder", "PAGES", "WIDGET_NOTE_CLASS", "PLAYER_CLASS"]
 
 _REPO = Path(__file__).resolve().parents[2]
 #: The guides and notes published beside the chapters: (file in the repository, page title).
@@ -44,6 +48,7 @@ PAGES = [("INSTRUCTOR.md", "Instructor's guide"), ("MAINTAINING.md", "Maintainer
          ("LICENSE-CONTENT.md", "Licence of the course's text and figures"),
          ("CHANGELOG.md", "Changes")]
 WIDGET_NOTE_CLASS = "annslam-widget-note"
+PLAYER_CLASS = "annslam-player"
 _WIDGET_VIEW = "application/vnd.jupyter.widget-view+json"
 _WIDGET_STATE = "application/vnd.jupyter.widget-state+json"
 _CONTROLS = {"IntSliderModel", "FloatSliderModel", "FloatLogSliderModel", "IntRangeSliderModel",
@@ -72,7 +77,8 @@ def _state(nb) -> dict:
 
 def widget_pictures(state: dict, model_id: str) -> list:
     """The outputs that stand for the widget ``model_id`` on a page without a kernel: the
-    pictures its Output widgets hold (with their metadata: the alt text) and one HTML line
+    pictures its Output widgets hold (with their metadata: the alt text), its Image widgets'
+    pictures (their title the alt text) and its HTML widgets' text, then one HTML line
     naming its controls and where they stand. Raises ValueError for a widget whose state was
     not saved (its page would show nothing)."""
     if model_id not in state:
@@ -93,6 +99,16 @@ def widget_pictures(state: dict, model_id: str) -> list:
                         "display_data", data={"image/png": o["data"]["image/png"],
                                               "text/plain": "<Figure>"},
                         metadata=copy.deepcopy(o.get("metadata", {}))))
+        elif name == "ImageModel" and st.get("format") == "png":
+            data = next((b["data"] for b in model.get("buffers", [])
+                         if b.get("path") == ["value"] and b.get("encoding") == "base64"), None)
+            if data:                           # a picture redrawn in place, its title its alt
+                pictures.append(nbformat.v4.new_output(
+                    "display_data", data={"image/png": data, "text/plain": "<Figure>"},
+                    metadata={"image/png": {"alt": st.get("tooltip") or ""}}))
+        elif name == "HTMLModel" and st.get("value"):
+            pictures.append(nbformat.v4.new_output(   # the widget's own text (escaped there)
+                "display_data", data={"text/html": st["value"], "text/plain": st["value"]}))
         elif name in _CONTROLS:
             label = st.get("description") or name.removesuffix("Model").lower()
             value = st.get("value")
@@ -113,12 +129,35 @@ def widget_pictures(state: dict, model_id: str) -> list:
         "display_data", data={"text/html": note, "text/plain": note})]
 
 
+def player(frames: list, control: str, stem: str, start: str | None = None) -> str:
+    """The HTML of an animation over a widget's stored ``frames`` (:mod:`plots.frames`): the
+    picture with its alt text, a Play button, a range control named after the widget's
+    ``control`` and the frame's readout, played by the site's ``annslam-player.js``. The
+    pictures are files ``../frames/{stem}/{k}.png`` beside the page's folder."""
+    if not frames:
+        raise ValueError(f"{stem}: an animation needs frames")
+    k0 = next((k for k, f in enumerate(frames) if f["value"] == start), 0)
+    data = [{"src": f"../frames/{stem}/{k}.png", "alt": f["alt"], "label": f["value"],
+             "text": f.get("text", "")} for k, f in enumerate(frames)]
+    e = html.escape
+    f0 = data[k0]
+    return (f'<figure class="{PLAYER_CLASS}" role="group" aria-label="Animation: the widget '
+            f'at {len(data)} values of {e(control)}" data-frames="{e(json.dumps(data))}">'
+            f'<img src="{e(f0["src"])}" alt="{e(f0["alt"])}">'
+            f'<figcaption><button type="button" class="annslam-play">Play</button> '
+            f'<label>{e(control)} <input type="range" min="0" max="{len(data) - 1}" '
+            f'step="1" value="{k0}" aria-valuetext="{e(f0["label"])}"></label> '
+            f'<output aria-live="polite">{e(f0["label"])}</output>'
+            f'<pre class="annslam-frame-text">{e(f0["text"])}</pre></figcaption></figure>')
+
+
 def site_notebook(instructor, name: str = "notebook"):
     """The page version of an instructor notebook: the student version's cells (its
     metadata kept to the release's keys), with the instructor notebook's stored outputs on
     every code cell the release leaves unchanged, and each widget replaced by
-    :func:`widget_pictures`."""
+    :func:`widget_pictures`, followed by its :func:`player` when its frames are stored."""
     page = student_version(instructor, name)
+    stem = Path(name).stem
     state = _state(instructor)
     for src, cell in zip(instructor.cells, page.cells):
         if cell.cell_type != "code" or cell.source != src.source:
@@ -131,8 +170,49 @@ def site_notebook(instructor, name: str = "notebook"):
             view = o.get("data", {}).get(_WIDGET_VIEW) if o.get("output_type") in (
                 "display_data", "execute_result") else None
             outs += widget_pictures(state, view["model_id"]) if view else [copy.deepcopy(o)]
+        anim = src.metadata.get("annslam", {})
+        if anim.get("frames"):
+            start = _control_value(state, src, anim["animate"]["control"])
+            note = player(anim["frames"], anim["animate"]["control"], stem, start)
+            outs.append(nbformat.v4.new_output("display_data", data={
+                "text/html": note, "text/plain": "an animation of the widget"}))
         cell.outputs, cell.execution_count = outs, src.get("execution_count")
     return page
+
+
+def _control_value(state: dict, cell, description: str) -> str | None:
+    """The readout the widget of ``cell`` was stored at, for its control ``description``
+    (the frame the animation starts on)."""
+    for o in cell.get("outputs", []):
+        view = o.get("data", {}).get(_WIDGET_VIEW)
+        if not view:
+            continue
+        stack = [view["model_id"]]
+        while stack:
+            model = state.get(stack.pop(), {})
+            st = model.get("state", {})
+            if st.get("description") == description:
+                if "_options_labels" in st and isinstance(st.get("index"), int):
+                    return st["_options_labels"][st["index"]]
+                fmt = st.get("readout_format") or (".2f" if "Float" in model.get(
+                    "model_name", "") else "d")
+                try:
+                    return format(st.get("value"), fmt)
+                except (TypeError, ValueError):
+                    return str(st.get("value"))
+            stack += [str(c).removeprefix("IPY_MODEL_") for c in st.get("children", [])]
+    return None
+
+
+def frame_files(instructor, stem: str) -> dict:
+    """{relative path: PNG bytes} of every stored frame of ``instructor``'s animations."""
+    import base64
+
+    files = {}
+    for c in instructor.cells:
+        for k, f in enumerate(c.get("metadata", {}).get("annslam", {}).get("frames", []) or []):
+            files[f"frames/{stem}/{k}.png"] = base64.b64decode(f["png"])
+    return files
 
 
 def _title(nb) -> str:
@@ -149,23 +229,14 @@ _LINK = re.compile(r"(?<!!)\[([^\]]+)\]\(([^)\s]+)\)")
 
 def _relink(text: str, here: str, staged: set, targets: LaunchTargets) -> str:
     """Markdown links to files the site does not hold (code, licences, configuration) lead to
-    the course repository's copy when one is configured; otherwise only their text stays."""
+    the course repository's copy when one is configured (GitHub's ``/blob/REF/PATH``
+    layout); otherwise only their text stays."""
     def fix(m):
         label, target = m.group(1), m.group(2)
         if re.match(r"^[a-z]+:", target) or target.startswith("#"):
             return m.group(0)
-        path = target.split("#")[0]
-        resolved = (Path(here).parent / path).as_posix()
-        resolved = str(Path(resolved)).replace("\\", "/")
-        norm = re.sub(r"(^|/)\./", r"\1", resolved)
-        parts = []
-        for part in norm.split("/"):
-            if part == "..":
-                if parts:
-                    parts.pop()
-            elif part:
-                parts.append(part)
-        norm = "/".join(parts)
+        norm = posixpath.normpath(posixpath.join(posixpath.dirname(here),
+                                                  target.split("#")[0]))
         if norm in staged or (norm.rstrip("/") + "/README.md") in staged:
             return m.group(0)
         if targets.course_repo:
@@ -199,12 +270,14 @@ nb_execution_mode = "off"
 nb_render_plugin = "annslam"
 nb_ipywidgets_js = {{}}
 nb_output_stderr = "remove"
-exclude_patterns = ["_build"]
+exclude_patterns = ["_build", "_extra"]
 suppress_warnings = ["myst.header", "mystnb.unknown_mime_type", "misc.highlighting_failure"]
 html_theme = "sphinx_book_theme"
 html_title = "annslam: EKF-SLAM for a car"
 html_static_path = ["_static"]
 html_css_files = ["annslam.css"]
+html_js_files = ["annslam-player.js"]
+html_extra_path = ["_extra"]
 html_theme_options = {{
     "use_download_button": True,
     "use_fullscreen_button": False,
@@ -222,6 +295,10 @@ html_context = {{"default_mode": "auto"}}
 # backgrounds (WCAG 2.1's 1.4.11).
 _CSS = """\
 .annslam-widget-note { font-style: italic; }
+.annslam-player img { max-width: 100%; height: auto; }
+.annslam-player figcaption { display: flex; flex-wrap: wrap; gap: 0.5em 1em; align-items: center; }
+.annslam-player input[type=range] { width: 14em; max-width: 60vw; }
+.annslam-frame-text { flex-basis: 100%; white-space: pre-wrap; margin: 0; }
 :focus-visible { outline: 3px solid #0072B2 !important; outline-offset: 2px; }
 """
 
@@ -254,6 +331,43 @@ def _copy_mathjax(dest: Path) -> None:
             dest.mkdir(parents=True, exist_ok=True)
             shutil.copy2(src / part, dest / part)
 
+
+# The animations' player: a range control and a Play button over the frames listed in the
+# figure's data-frames; the picture's alt text and the readout follow the frame. Playing
+# steps once a second and stops at the last frame; nothing moves unless the reader asks.
+_PLAYER_JS = """\
+document.addEventListener("DOMContentLoaded", () => {
+  for (const fig of document.querySelectorAll("figure.annslam-player")) {
+    const frames = JSON.parse(fig.dataset.frames);
+    const img = fig.querySelector("img"), range = fig.querySelector("input[type=range]");
+    const out = fig.querySelector("output"), text = fig.querySelector(".annslam-frame-text");
+    const play = fig.querySelector("button.annslam-play");
+    for (const f of frames) { const i = new Image(); i.src = f.src; }
+    let timer = null;
+    const show = (k) => {
+      const f = frames[k];
+      range.value = k; img.src = f.src; img.alt = f.alt;
+      range.setAttribute("aria-valuetext", f.label); out.textContent = f.label;
+      text.textContent = f.text;
+    };
+    const stop = () => {
+      clearInterval(timer); timer = null; play.textContent = "Play";
+      out.setAttribute("aria-live", "polite");
+    };
+    range.addEventListener("input", () => { stop(); show(Number(range.value)); });
+    play.addEventListener("click", () => {
+      if (timer) { stop(); return; }
+      out.setAttribute("aria-live", "off");
+      let k = Number(range.value) >= frames.length - 1 ? 0 : Number(range.value);
+      show(k); play.textContent = "Pause";
+      timer = setInterval(() => {
+        k += 1; show(k);
+        if (k >= frames.length - 1) stop();
+      }, 1000);
+    });
+  }
+});
+"""
 
 # A car's path around a landmark, in the course's blue and orange.
 _FAVICON = ('<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 16 16">'
@@ -295,6 +409,8 @@ def build(out, *, targets: LaunchTargets | None = None, notebooks=None, quiet: b
         shutil.rmtree(stage)
     (stage / "_static").mkdir(parents=True)
     (stage / "notebooks").mkdir()
+    (stage / "_extra").mkdir()
+    (stage / "_static" / "annslam-player.js").write_text(_PLAYER_JS)
     (stage / "_static" / "annslam.css").write_text(_CSS)
     (stage / "_static" / "favicon.svg").write_text(_FAVICON)
     staged = {"index.md"} | {f"notebooks/{p.name}" for p in paths} | {p for p, _ in PAGES}
@@ -309,6 +425,9 @@ def build(out, *, targets: LaunchTargets | None = None, notebooks=None, quiet: b
             if c.cell_type == "markdown":
                 c.source = _relink(c.source, f"notebooks/{p.name}", staged, targets)
         nbformat.write(page, stage / "notebooks" / p.name)
+        for rel, data in frame_files(nb, p.stem).items():
+            (stage / "_extra" / rel).parent.mkdir(parents=True, exist_ok=True)
+            (stage / "_extra" / rel).write_bytes(data)
         chapters.append((p.stem, _title(nb)))
     for rel, _title_ in PAGES:
         dest = stage / rel

@@ -6,6 +6,7 @@
 - ``ann``: the network's figures (the paper's Figures 6-8)
 - ``blit``: a widget figure whose steps redraw only what moves
 - ``alt``: every figure's alt text (what it shows, for a screen reader)
+- ``frames``: a widget's pictures at several values of a control, for the website's animations
 """
 
-__all__ = ["style", "data", "slam", "ann", "blit", "alt"]
+__all__ = ["style", "data", "slam", "ann", "blit", "alt", "frames"]

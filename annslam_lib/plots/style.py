@@ -19,7 +19,7 @@ from matplotlib.figure import Figure
 from . import alt
 
 __all__ = ["notebook_setup", "axes", "figure", "widget_figure", "show_widget_figure", "show_png",
-           "render_png",
+           "show_in_image", "render_png",
            "layout_signature",
            "BEACON_STYLE", "FIG_WIDTH", "DPI", "PALETTE", "BLUE", "ORANGE", "GREEN", "RED",
            "PURPLE", "SKY", "BLACK", "GREY"]
@@ -73,6 +73,18 @@ def show_png(png: bytes, alt_text: str) -> None:
         raise ValueError(f"show_png needs the picture's alt text (at least {alt.MIN_LENGTH} "
                          f"characters: what it shows), got {alt_text!r}")
     display(Image(data=png, format="png", alt=alt_text))
+
+
+def show_in_image(image, png: bytes, alt_text: str) -> None:
+    """Show PNG bytes in an ipywidgets ``Image`` (a widget that redraws in place, as chapter
+    05's and 08's explorers do) with their alt text as the picture's ``title``, its name for
+    a screen reader in JupyterLab and on the course's website."""
+    if not isinstance(alt_text, str) or len(alt_text) < alt.MIN_LENGTH:
+        raise ValueError(f"show_in_image needs the picture's alt text (at least "
+                         f"{alt.MIN_LENGTH} characters: what it shows), got {alt_text!r}")
+    with image.hold_sync():                    # one message: the picture and its words together
+        image.value = png
+        image.tooltip = alt_text
 
 
 #: Axes positions of the widget figures laid out so far, by :func:`layout_signature`.
