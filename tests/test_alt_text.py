@@ -30,9 +30,6 @@ def _pictures(nb: dict):
         for o in model.get("state", {}).get("outputs", []) or []:
             if "image/png" in o.get("data", {}):
                 yield f"widget {model_id[:8]}", o
-        if model.get("model_name") == "ImageModel":   # a picture redrawn in place: its title
-            yield f"image widget {model_id[:8]}", {"metadata": {"image/png": {
-                "alt": model["state"].get("tooltip") or ""}}}
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)

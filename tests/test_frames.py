@@ -37,4 +37,4 @@ def test_an_image_widget_gets_its_picture_and_its_alt_text_together():
         style.show_in_image(img, b"\x89PNG", "a plot")
     words = "Figure: the EKF's path and map at t = 40 s, against the surveyed beacons."
     style.show_in_image(img, b"\x89PNG", words)
-    assert (img.value, img.tooltip) == (b"\x89PNG", words)
+    assert (img.value, img.alt_text, img.tooltip) == (b"\x89PNG", words, None)

@@ -75,11 +75,12 @@ def _state(nb) -> dict:
     return nb.metadata.get("widgets", {}).get(_WIDGET_STATE, {}).get("state", {})
 
 
-def widget_pictures(state: dict, model_id: str) -> list:
+def widget_pictures(state: dict, model_id: str, image_alt: str | None = None) -> list:
     """The outputs that stand for the widget ``model_id`` on a page without a kernel: the
     pictures its Output widgets hold (with their metadata: the alt text), its Image widgets'
-    pictures (their title the alt text) and its HTML widgets' text, then one HTML line
-    naming its controls and where they stand. Raises ValueError for a widget whose state was
+    pictures (alt text: their title, else ``image_alt``: the alt text of the animation's frame
+    at the stored value) and its HTML widgets' text, then one HTML line naming its controls
+    and where they stand. Raises ValueError for a widget whose state was
     not saved (its page would show nothing)."""
     if model_id not in state:
         raise ValueError(f"widget {model_id[:8]} has no saved state: save the notebook with "
@@ -105,7 +106,7 @@ def widget_pictures(state: dict, model_id: str) -> list:
             if data:                           # a picture redrawn in place, its title its alt
                 pictures.append(nbformat.v4.new_output(
                     "display_data", data={"image/png": data, "text/plain": "<Figure>"},
-                    metadata={"image/png": {"alt": st.get("tooltip") or ""}}))
+                    metadata={"image/png": {"alt": st.get("tooltip") or image_alt or ""}}))
         elif name == "HTMLModel" and st.get("value"):
             pictures.append(nbformat.v4.new_output(   # the widget's own text (escaped there)
                 "display_data", data={"text/html": st["value"], "text/plain": st["value"]}))
@@ -165,14 +166,17 @@ def site_notebook(instructor, name: str = "notebook"):
         meta = cell_meta(src)
         if meta.get("solution") or meta.get("grade"):
             continue
+        anim = src.metadata.get("annslam", {})
+        start = (_control_value(state, src, anim["animate"]["control"])
+                 if anim.get("frames") else None)
+        image_alt = next((f["alt"] for f in anim.get("frames", []) if f["value"] == start), None)
         outs = []
         for o in src.get("outputs", []):
             view = o.get("data", {}).get(_WIDGET_VIEW) if o.get("output_type") in (
                 "display_data", "execute_result") else None
-            outs += widget_pictures(state, view["model_id"]) if view else [copy.deepcopy(o)]
-        anim = src.metadata.get("annslam", {})
+            outs += (widget_pictures(state, view["model_id"], image_alt) if view
+                     else [copy.deepcopy(o)])
         if anim.get("frames"):
-            start = _control_value(state, src, anim["animate"]["control"])
             note = player(anim["frames"], anim["animate"]["control"], stem, start)
             outs.append(nbformat.v4.new_output("display_data", data={
                 "text/html": note, "text/plain": "an animation of the widget"}))

@@ -87,7 +87,7 @@ def _picture(widget, outputs):
     while stack:
         w = stack.pop(0)
         if type(w).__name__ == "Image" and getattr(w, "format", "") == "png" and w.value:
-            return bytes(w.value), w.tooltip or ""
+            return bytes(w.value), getattr(w, "alt_text", "") or w.tooltip or ""
         stack.extend(getattr(w, "children", ()) or ())
     raise ValueError("the widget showed no PNG picture")
 

@@ -77,14 +77,15 @@ def show_png(png: bytes, alt_text: str) -> None:
 
 def show_in_image(image, png: bytes, alt_text: str) -> None:
     """Show PNG bytes in an ipywidgets ``Image`` (a widget that redraws in place, as chapter
-    05's and 08's explorers do) with their alt text as the picture's ``title``, its name for
-    a screen reader in JupyterLab and on the course's website."""
+    05's and 08's explorers do) and keep their alt text on the widget object
+    (``image.alt_text``), where the website's animation frames read it. Not as the Image's
+    ``tooltip``: with one, ipywidgets 8.1's Image did not render in JupyterLab 4.6 (a
+    JavaScript error in its place)."""
     if not isinstance(alt_text, str) or len(alt_text) < alt.MIN_LENGTH:
         raise ValueError(f"show_in_image needs the picture's alt text (at least "
                          f"{alt.MIN_LENGTH} characters: what it shows), got {alt_text!r}")
-    with image.hold_sync():                    # one message: the picture and its words together
-        image.value = png
-        image.tooltip = alt_text
+    image.alt_text = alt_text
+    image.value = png
 
 
 #: Axes positions of the widget figures laid out so far, by :func:`layout_signature`.
