@@ -75,6 +75,21 @@ def _state(nb) -> dict:
     return nb.metadata.get("widgets", {}).get(_WIDGET_STATE, {}).get("state", {})
 
 
+def _models(state: dict, model_id: str):
+    """(model name, state, model) of ``model_id`` and every widget inside it, each once,
+    parents before their children in the order they show."""
+    seen, stack = set(), [model_id]
+    while stack:
+        mid = stack.pop()
+        if mid in seen or mid not in state:
+            continue
+        seen.add(mid)
+        model = state[mid]
+        st = model.get("state", {})
+        yield model.get("model_name", ""), st, model
+        stack += [str(c).removeprefix("IPY_MODEL_") for c in reversed(st.get("children", []))]
+
+
 def widget_pictures(state: dict, model_id: str, image_alt: str | None = None) -> list:
     """The outputs that stand for the widget ``model_id`` on a page without a kernel: the
     pictures its Output widgets hold (with their metadata: the alt text), its Image widgets'
@@ -85,14 +100,8 @@ def widget_pictures(state: dict, model_id: str, image_alt: str | None = None) ->
     if model_id not in state:
         raise ValueError(f"widget {model_id[:8]} has no saved state: save the notebook with "
                          "its widget state (the refresh does)")
-    pictures, controls, seen = [], [], set()
-
-    def walk(mid: str) -> None:
-        if mid in seen or mid not in state:
-            return
-        seen.add(mid)
-        model = state[mid]
-        name, st = model.get("model_name", ""), model.get("state", {})
+    pictures, controls = [], []
+    for name, st, model in _models(state, model_id):
         if name == "OutputModel":
             for o in st.get("outputs", []):
                 if "image/png" in o.get("data", {}):
@@ -119,10 +128,6 @@ def widget_pictures(state: dict, model_id: str, image_alt: str | None = None) ->
                 value = labels[index] if isinstance(index, int) and 0 <= index < len(labels) else value
             span = f" (from {st['min']} to {st['max']})" if "min" in st and "max" in st else ""
             controls.append(f"{label} = {value}{span}")
-        for child in st.get("children", []):
-            walk(str(child).removeprefix("IPY_MODEL_"))
-
-    walk(model_id)
     words = "; ".join(controls) if controls else "no control"
     note = (f'<p class="{WIDGET_NOTE_CLASS}">In JupyterLab this picture is interactive '
             f"({html.escape(words)}). Open the chapter to move its controls.</p>")
@@ -191,20 +196,15 @@ def _control_value(state: dict, cell, description: str) -> str | None:
         view = o.get("data", {}).get(_WIDGET_VIEW)
         if not view:
             continue
-        stack = [view["model_id"]]
-        while stack:
-            model = state.get(stack.pop(), {})
-            st = model.get("state", {})
+        for name, st, _ in _models(state, view["model_id"]):
             if st.get("description") == description:
                 if "_options_labels" in st and isinstance(st.get("index"), int):
                     return st["_options_labels"][st["index"]]
-                fmt = st.get("readout_format") or (".2f" if "Float" in model.get(
-                    "model_name", "") else "d")
+                fmt = st.get("readout_format") or (".2f" if "Float" in name else "d")
                 try:
                     return format(st.get("value"), fmt)
                 except (TypeError, ValueError):
                     return str(st.get("value"))
-            stack += [str(c).removeprefix("IPY_MODEL_") for c in st.get("children", [])]
     return None
 
 
