@@ -16,6 +16,9 @@ would, and check that
 - the text the browser shows is exactly what the same widget, built in this process by the
   same set-up code and call and moved by the same step, prints for that control value;
 
+- the keyboard reaches every control of the widget by Tab, in order, each with a visible
+  focus outline, and operates the check boxes and drop-downs (:func:`check_keyboard`);
+
 and keep a screenshot of each moved widget in test-artifacts/browser/. Skipped, saying why,
 without Playwright or Chromium (as tests/test_browser.py).
 
@@ -123,6 +126,87 @@ WIDGET_STATE_JS = """([i, old]) => {
   if (old && (s.text === old.text || s.img === old.img)) return null;
   return s;
 }"""
+
+
+# Every control of the widget in cell `i` the keyboard can reach (tabindex >= 0 or editable
+# text such as a slider's readout, shown), in
+# page order, each marked with its place (data-annslam-key) and described.
+CONTROLS_JS = """(i) => {
+  const out = document.querySelectorAll('.jp-Notebook .jp-Cell')[i].querySelector('.jp-OutputArea');
+  const els = [...out.querySelectorAll('*')].filter(e => (e.tabIndex >= 0 || e.isContentEditable)
+                                                       && !e.disabled && e.getClientRects().length);
+  return els.map((e, k) => { e.dataset.annslamKey = String(k);
+    return {tag: e.tagName, role: e.getAttribute('role'), type: e.type || null,
+            cls: e.className.toString()}; });
+}"""
+
+# The focused element: its place among CONTROLS_JS's, its outline and the colour behind it.
+FOCUSED_JS = """() => {
+  const e = document.activeElement;
+  const s = getComputedStyle(e);
+  let b = e.parentElement, bg = 'rgba(0, 0, 0, 0)';     // the outline lies outside e
+  while (b && (bg = getComputedStyle(b).backgroundColor) === 'rgba(0, 0, 0, 0)') b = b.parentElement;
+  return {key: e.dataset.annslamKey ?? null, tag: e.tagName, cls: e.className.toString(), style: s.outlineStyle,
+          width: parseFloat(s.outlineWidth), color: s.outlineColor, behind: bg,
+          visible: e.matches(':focus-visible'), checked: e.checked ?? null,
+          value: e.getAttribute('aria-valuenow') ?? e.value ?? null};
+}"""
+
+
+def _rgb(css: str) -> tuple:
+    return tuple(float(v) for v in re.findall(r"[\d.]+", css)[:3])
+
+
+def contrast(a: str, b: str) -> float:
+    """WCAG 2.1's contrast ratio of two CSS rgb() colours."""
+    def lum(rgb):
+        c = [v / 255 for v in rgb]
+        c = [v / 12.92 if v <= 0.04045 else ((v + 0.055) / 1.055) ** 2.4 for v in c]
+        return 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]
+    hi, lo = sorted((lum(_rgb(a)), lum(_rgb(b))), reverse=True)
+    return (hi + 0.05) / (lo + 0.05)
+
+
+def check_keyboard(page, cell: int, where: str) -> list[dict]:
+    """Tab through the widget of ``cell`` from its first label: the keyboard reaches every
+    control in page order, one Tab each, and then leaves the widget; each shows a focus
+    outline at least 2 px wide with a contrast of 3:1 or more against what is behind it
+    (WCAG 2.4.7, and 1.4.11's figure for a focus indicator); a check box toggles with Space
+    and a drop-down moves with the arrow keys, each put back. Returns the controls."""
+    controls = page.evaluate(CONTROLS_JS, cell)
+    assert controls, f"{where}: no control the keyboard can reach"
+    page.locator(".jp-Notebook .jp-Cell").nth(cell).locator(".widget-label").first.click()
+    for _ in range(6):                       # past the cell's own toolbar to the first control
+        page.keyboard.press("Tab")
+        if page.evaluate(FOCUSED_JS)["key"] == "0":
+            break
+    for k, c in enumerate(controls):
+        if k:
+            page.keyboard.press("Tab")
+        f = page.evaluate(FOCUSED_JS)
+        what = f"{where}: control {k} ({c['tag']} {c['role'] or c['type'] or ''})"
+        assert f["key"] == str(k), f"{what}: Tab went to control {f['key']} instead"
+        assert f["visible"] and f["style"] not in ("none", "hidden") and f["width"] >= 2, (
+            f"{what}: no visible focus outline ({f['style']} {f['width']} px)")
+        ratio = contrast(f["color"], f["behind"])
+        assert ratio >= 3, f"{what}: focus outline {f['color']} on {f['behind']}: {ratio:.2f}:1"
+        if c["type"] == "checkbox":
+            page.keyboard.press("Space")
+            assert page.evaluate(FOCUSED_JS)["checked"] is (not f["checked"]), f"{what}: Space"
+            page.keyboard.press("Space")
+        elif c["tag"] == "SELECT":
+            for key, back in (("ArrowDown", "ArrowUp"), ("ArrowUp", "ArrowDown")):
+                page.keyboard.press(key)
+                moved = page.evaluate(FOCUSED_JS)
+                if moved["value"] != f["value"]:
+                    page.keyboard.press(back)
+                    break
+            assert moved["value"] != f["value"], f"{what}: the arrow keys did not change the choice"
+        g = page.evaluate(FOCUSED_JS)
+        assert g["key"] == str(k), f"{what}: the keys moved the focus to {g}"
+    page.keyboard.press("Tab")
+    assert page.evaluate(FOCUSED_JS)["key"] is None, f"{where}: Tab stayed in the widget"
+    return controls
 
 
 def notebooks(first: int, last: int) -> list[str]:
@@ -268,9 +352,10 @@ def check_widgets(stem, lab, browser):
             ARTIFACTS.mkdir(parents=True, exist_ok=True)
             page.locator(".jp-Notebook .jp-Cell").nth(i).screenshot(
                 path=str(ARTIFACTS / f"{stem}-cell{i}.png"))
+            keys = check_keyboard(page, i, f"{stem} {call}")
             print(f"{stem} {call}: Run All of the widget notebook {t_run:.1f} s; ArrowRight "
                   f"answered in {took:.2f} s (polled every 50 ms); readouts "
-                  f"{before['readouts']} -> {after['readouts']}")
+                  f"{before['readouts']} -> {after['readouts']}; {len(keys)} controls by Tab")
     finally:
         page.close()
 

@@ -234,7 +234,8 @@ def _where(html: str) -> str:
 def test_the_chapter_in_jupyterlab_has_no_wcag_finding_of_the_courses_own(page, lab):
     """axe-core (WCAG 2.1 A/AA) on chapter 00 after Run All in JupyterLab: every serious or
     critical finding is one of UPSTREAM's; every picture axe finds without alt text has its
-    alt text in the output's metadata; and the slider is reached by Tab and moved by keys."""
+    alt text in the output's metadata; and the slider is reached by Tab, shows
+    its focus outline and is moved by keys."""
     import axe_playwright_python
 
     page.goto(f"{lab.url}/lab/tree/{NOTEBOOK.name}?token={lab.token}&reset")
@@ -273,6 +274,10 @@ def test_the_chapter_in_jupyterlab_has_no_wcag_finding_of_the_courses_own(page, 
         if page.evaluate("document.activeElement.getAttribute('role')") == "slider":
             break
     assert page.evaluate("document.activeElement.getAttribute('role')") == "slider"
+    from browser_widgets import FOCUSED_JS, contrast   # the widget tests' focus checks
+    f = page.evaluate(FOCUSED_JS)
+    assert f["visible"] and f["style"] == "solid" and f["width"] >= 2
+    assert contrast(f["color"], f["behind"]) >= 3
     before = page.evaluate("document.activeElement.getAttribute('aria-valuenow')")
     page.keyboard.press("ArrowRight")
     _wait(page, lab, "(v) => document.activeElement.getAttribute('aria-valuenow') !== v",

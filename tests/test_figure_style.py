@@ -93,3 +93,47 @@ def test_legend_text_is_never_below_the_course_size_and_no_text_below_8_pt():
             if int(m.group(1)) < 8:
                 found.append(f"{path.relative_to(ROOT)}: fontsize={m.group(1)}")
     assert not found, "\n".join(found)
+
+
+def test_keyboard_ready_gives_a_widget_its_focus_outline_and_keeps_the_output_last():
+    from ipywidgets import FloatSlider, VBox, interactive
+
+    w = style.keyboard_ready(interactive(lambda a: None, a=FloatSlider()))
+    sheets = [c for c in w.children if type(c).__name__ == "HTML"]
+    assert len(sheets) == 1 and w.children[-1] is w.out and w.children[-2] is sheets[0]
+    assert style.FOCUS_CLASS in w._dom_classes and sheets[0].layout.display == "none"
+    css = sheets[0].value
+    assert css.startswith("<style>") and f".{style.FOCUS_CLASS} :focus-visible" in css
+    width = re.search(r"outline: (\d+)px solid", css)
+    assert width and int(width.group(1)) >= 2
+    box = style.keyboard_ready(VBox([FloatSlider()]))
+    assert [type(c).__name__ for c in box.children] == ["FloatSlider", "HTML"]
+
+
+def test_every_chapter_widget_is_returned_keyboard_ready():
+    """Each chapter function that builds a widget (``interactive(`` or ``VBox(``) returns it
+    through ``keyboard_ready``; the browser tests check the outline itself."""
+    import ast
+
+    chapters = Path(style.__file__).parents[1] / "chapters"
+    builders, missing = 0, []
+    for f in sorted(chapters.glob("ch*.py")):
+        for fn in ast.walk(ast.parse(f.read_text())):
+            if not isinstance(fn, ast.FunctionDef):
+                continue
+            calls = {getattr(n.func, "id", None) for n in ast.walk(fn) if isinstance(n, ast.Call)}
+            if not calls & {"interactive", "VBox"}:
+                continue
+            builders += 1
+            returns, todo = [], list(ast.iter_child_nodes(fn))
+            while todo:                     # its own returns, not those of its callbacks
+                n = todo.pop()
+                if isinstance(n, ast.Return):
+                    returns.append(n)
+                elif not isinstance(n, (ast.FunctionDef, ast.Lambda)):
+                    todo.extend(ast.iter_child_nodes(n))
+            if not returns or not all(isinstance(r.value, ast.Call) and
+                                      getattr(r.value.func, "id", None) == "keyboard_ready"
+                                      for r in returns):
+                missing.append(f"{f.name}:{fn.name}")
+    assert builders == 13 and missing == []

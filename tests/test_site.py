@@ -148,8 +148,9 @@ def test_every_stored_figure_is_on_its_page_with_its_alt_text(built, path):
     nb = nbformat.read(path, as_version=4)
     expected = _figures(site.site_notebook(nb, path.name))
     # independently of the page version: the instructor's figures, but those of the
-    # exercises' cells, and each widget's saved picture in place of the widget
-    own = []
+    # exercises' cells, and each widget's saved picture in place of the widget, or, for a
+    # widget with an animation, the animation starting on the frame at the stored value
+    own, players = [], []
     for c in nb.cells:
         meta = c.get("metadata", {}).get("nbgrader", {})
         if c.cell_type != "code" or meta.get("solution") or meta.get("grade"):
@@ -162,6 +163,9 @@ def test_every_stored_figure_is_on_its_page_with_its_alt_text(built, path):
                     if anim.get("frames") else None
                 frame_alt = next((f["alt"] for f in anim.get("frames", [])
                                   if f["value"] == start), None)
+                if anim.get("frames"):
+                    players.append(frame_alt)
+                    continue
                 own += _figures(nbformat.from_dict({"cells": [{"cell_type": "code", "outputs":
                                 site.widget_pictures(site._state(nb), view["model_id"],
                                                      frame_alt)}]}))
@@ -173,6 +177,9 @@ def test_every_stored_figure_is_on_its_page_with_its_alt_text(built, path):
              if tag == "img" and "_images/" in a.get("src", "")]
     assert shown == expected, f"{path.name}: {len(shown)} pictures shown, {len(expected)} stored"
     assert all(len(a) >= alt.MIN_LENGTH for a in shown)
+    starts = [a.get("alt") for tag, a in page.tags
+              if tag == "img" and "/frames/" in a.get("src", "")]
+    assert starts == players and all(players)
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
@@ -431,30 +438,59 @@ def test_a_feedback_page_passes_wcag_21_aa(page):
     assert _serious(_axe(page)) == []
 
 
-def test_keyboard_focus_is_visible_on_every_control_of_a_chapter(served, page):
-    """Tab through the first 40 stops of a chapter page: each focused element shows a focus
-    ring (an outline or a box shadow), none is hidden."""
-    page.goto(f"{served}/notebooks/05_ekf_slam.html", wait_until="load")
+# The focused element: its focus ring (an outline or a box shadow) and whether it can be
+# seen (a box, no ancestor transparent, inside every ancestor that clips its overflow).
+FOCUS_JS = """() => {
+    const e = document.activeElement;
+    if (!e || e === document.body) return null;
+    const s = getComputedStyle(e);
+    const r = e.getBoundingClientRect();
+    let shown = r.width > 0 && r.height > 0;
+    for (let a = e; a && a !== document.body && shown; a = a.parentElement) {
+        const t = getComputedStyle(a);
+        if (parseFloat(t.opacity) === 0 || t.visibility === 'hidden') shown = false;
+        if (a !== e && t.overflowY !== 'visible') {
+            const c = a.getBoundingClientRect();
+            if (r.bottom <= c.top || r.top >= c.bottom) shown = false;
+        }
+    }
+    return {tag: e.tagName, text: (e.innerText || e.getAttribute('aria-label') || '').slice(0, 40),
+            ring: (s.outlineStyle !== 'none' && parseFloat(s.outlineWidth) > 0)
+                  || (s.boxShadow && s.boxShadow !== 'none'),
+            shown, toc: !!e.closest('.bd-sidebar-secondary')};
+}"""
+
+
+def _tab_stops(page, count: int) -> list[dict]:
     page.evaluate("document.activeElement && document.activeElement.blur()")
-    seen, invisible = 0, []
-    for _ in range(40):
+    stops = []
+    for _ in range(count):
         page.keyboard.press("Tab")
-        info = page.evaluate("""() => {
-            const e = document.activeElement;
-            if (!e || e === document.body) return null;
-            const s = getComputedStyle(e);
-            const r = e.getBoundingClientRect();
-            return {tag: e.tagName, text: (e.innerText || e.getAttribute('aria-label') || '').slice(0, 40),
-                    ring: (s.outlineStyle !== 'none' && parseFloat(s.outlineWidth) > 0)
-                          || (s.boxShadow && s.boxShadow !== 'none'),
-                    shown: r.width > 0 && r.height > 0};
-        }""")
-        if info is None:
-            continue
-        seen += 1
-        if not (info["ring"] and info["shown"]):
-            invisible.append(info)
-    assert seen >= 20 and invisible == []
+        info = page.evaluate(FOCUS_JS)
+        if info is not None:
+            stops.append(info)
+    return stops
+
+
+def test_keyboard_focus_is_visible_on_every_control_of_a_chapter(served, page):
+    """Tab through the first 40 stops of a chapter page, and into the page's contents with
+    a full-width figure in view (the theme then folds them into a bar): each focused element
+    shows a focus ring and none is hidden, the folded contents' links included."""
+    page.goto(f"{served}/notebooks/05_ekf_slam.html", wait_until="load")
+    stops = _tab_stops(page, 40)
+    assert len(stops) >= 20 and [i for i in stops if not (i["ring"] and i["shown"])] == []
+    page.locator(f"figure.{site.PLAYER_CLASS}").scroll_into_view_if_needed()
+    page.wait_for_function("document.querySelector('.bd-sidebar-secondary.hide') !== null")
+    # from the link before the contents (the figure stays in view), Tab on into them
+    page.evaluate("""() => { const all = [...document.querySelectorAll('.prev-next-area a')];
+                             all[all.length - 1].focus({preventScroll: true}); }""")
+    stops = []
+    for _ in range(6):
+        page.keyboard.press("Tab")
+        stops.append(page.evaluate(FOCUS_JS))
+    assert page.locator(".bd-sidebar-secondary.hide").count() == 1      # still folded
+    assert sum(i["toc"] for i in stops) >= 5
+    assert [i for i in stops if not (i["ring"] and i["shown"])] == []
 
 
 # --- the widgets' animations -------------------------------------------------------------

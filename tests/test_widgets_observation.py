@@ -71,7 +71,7 @@ def test_bad_input_is_rejected():
 
 
 def sliders(w):
-    return {c.description: c for c in w.children[:-1]}
+    return {c.description: c for c in w.children if hasattr(c, "continuous_update")}
 
 
 def test_explorer_summary_follows_the_sliders():

@@ -7,6 +7,7 @@ from ipywidgets import IntSlider, interactive
 from ..data.records import Dataset, Laser
 from ..plots.data import plot_detections_polar, plot_gps_gaps, plot_map, plot_scan_vehicle_frame
 from ..plots.style import GREEN, ORANGE, RED, figure, show_widget_figure, widget_figure
+from ..plots.style import keyboard_ready
 from ..plots.style import notebook_setup as setup
 
 __all__ = ["setup", "scan_summary", "scan_readout", "scan_scrubber", "car_park_figure",
@@ -145,4 +146,4 @@ def scan_scrubber(ds: Dataset, *, max_range: float = 20.0, start: int = 0):
                        description="scan", continuous_update=False)
     widget = interactive(draw, k=slider)
     widget.holder = holder
-    return widget
+    return keyboard_ready(widget)

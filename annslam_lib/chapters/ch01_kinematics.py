@@ -20,6 +20,7 @@ from ..models.vehicle import ACFR_UTE, Vehicle
 from ..plots.blit import Blit, drawn_by
 from ..plots.alt import alt_text
 from ..plots.style import BLUE, FIG_WIDTH, GREEN, ORANGE, RED, figure, show_png, widget_figure
+from ..plots.style import keyboard_ready
 from ..plots.style import notebook_setup as setup
 
 __all__ = ["setup", "circumradius", "arc_vs_euler", "plot_arc_vs_euler", "kinematics_readout",
@@ -145,7 +146,7 @@ def kinematics_explorer(vehicle: Vehicle = ACFR_UTE, *, speed: float = 2.0,
     widget = interactive(draw, **sliders)
     widget.holder = holder
     widget.views = views
-    return widget
+    return keyboard_ready(widget)
 
 
 def _scene_limits(s: dict):

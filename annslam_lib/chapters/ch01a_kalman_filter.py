@@ -14,6 +14,7 @@ from ipywidgets import FloatSlider, interactive
 from .. import _checks
 from ..models.uncertainty import ellipse_points
 from ..plots.style import BLUE, GREEN, ORANGE, RED, figure, show_widget_figure, widget_figure
+from ..plots.style import keyboard_ready
 from ..plots.style import notebook_setup as setup
 from ..slam import kalman
 from ..slam.kalman import joseph_covariance, kalman_gain
@@ -348,4 +349,4 @@ def update_explorer(*, mu=12.0, var=0.34, z=12.4, r=0.16):
         measurement_var=FloatSlider(value=r, min=0.0, max=2.0, step=0.02,
                                     description="meas. var", **slider))
     widget.holder = holder
-    return widget
+    return keyboard_ready(widget)

@@ -27,6 +27,7 @@ from ..plots.alt import alt_text
 from ..plots.style import BLUE, GREEN, PURPLE, RED, figure, show_png, widget_figure
 from ..data.records import Dataset, Odometry
 from ..models.vehicle import Vehicle
+from ..plots.style import keyboard_ready
 from ..plots.style import notebook_setup as setup
 
 __all__ = ["setup", "offset_geometry_figure", "slip_figure", "Stretch", "car_park_stretch", "offset_paths", "offset_summary", "best_offset",
@@ -300,7 +301,7 @@ def offset_explorer(ds: Dataset, t0: float = TURN[0], t1: float = TURN[1]):
         align=Checkbox(value=True, description="fit initial heading"))
     widget.holder = holder
     widget.views = views
-    return widget
+    return keyboard_ready(widget)
 
 
 def _draw_stretch(stretch: Stretch, a: float, b: float, align: bool, axes):

@@ -25,6 +25,7 @@ from ..plots.blit import Blit, drawn_by
 from ..plots.alt import alt_text, describe
 from ..plots.style import BLUE, GREEN, ORANGE, PURPLE, RED, figure, show_png, widget_figure
 from ..models.uncertainty import coverage, draw_ellipse, expected_coverage, monte_carlo, propagate
+from ..plots.style import keyboard_ready
 from ..plots.style import notebook_setup as setup
 
 #: The laser pose of the explorer: origin, heading East.
@@ -202,7 +203,7 @@ def measurement_explorer(*, landmark=(10.0, 3.0), sigma_xy: float = 0.3,
     )
     widget.holder = holder
     widget.views = views
-    return widget
+    return keyboard_ready(widget)
 
 
 def _draw_prediction_data(summary: dict, axes, n_samples: int) -> list:

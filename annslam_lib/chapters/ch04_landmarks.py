@@ -25,6 +25,7 @@ from ..models.observation import observe
 from ..plots.style import figure, show_widget_figure, widget_figure
 from ..data.records import Dataset
 from ..models.uncertainty import ellipse_points
+from ..plots.style import keyboard_ready
 from ..plots.style import notebook_setup as setup
 from ..plots.style import BLACK, BLUE, GREEN, GREY, ORANGE, PURPLE, RED, SKY
 
@@ -151,7 +152,7 @@ def beacon_scrubber(ds: Dataset, *, config: BeaconConfig | None = None, start: i
         max_gap_beams=IntSlider(value=base.max_gap_beams, min=0, max=4, step=1,
                                 description="max gap", continuous_update=False))
     widget.holder = holder
-    return widget
+    return keyboard_ready(widget)
 
 
 # ------------------------------------------------------------------ gates in measurement space
@@ -249,7 +250,7 @@ def gate_explorer(*, prob: float = 0.99, new_prob: float = NEW_LANDMARK_PROB):
                                                     description="gate prob",
                                                     continuous_update=False))
     widget.holder = holder
-    return widget
+    return keyboard_ready(widget)
 
 
 def tape_levels_figure(ranges, levels):

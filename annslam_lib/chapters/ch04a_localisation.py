@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 from scipy.stats import chi2
-from ipywidgets import Dropdown, FloatSlider, interactive
+from ipywidgets import FloatSlider, IntSlider, interactive
 
 from .. import _checks
 from .._cache import memoize
@@ -21,6 +21,7 @@ from ..evaluation import consistency
 from ..evaluation.summary import run_metrics
 from ..evaluation.trajectory import trajectory_errors
 from ..plots.style import BLUE, GREEN, ORANGE, RED, figure, show_widget_figure, widget_figure
+from ..plots.style import keyboard_ready
 from ..plots.style import notebook_setup as setup
 from ..slam import localisation
 from ..slam.config import SlamConfig
@@ -285,8 +286,9 @@ def map_error_summary(car: Dataset, beacon: int, shift: float, *, cache: dict | 
 
 
 def map_error_explorer(car: Dataset, *, beacon: int = 12, shift: float = 0.0):
-    """A dropdown for the beacon and a slider for how far its map position is wrong; shows
-    the localisation error along the run and what the gate did with its sightings.
+    """A slider for the beacon (its index in the map) and one for how far its map position
+    is wrong; shows the localisation error along the run and what the gate did with its
+    sightings.
     ``widget.holder['summary']`` keeps the latest :func:`map_error_summary`."""
     holder = {}
     # the chapter's study of this beacon (every slider position, from the study cache)
@@ -313,9 +315,12 @@ def map_error_explorer(car: Dataset, *, beacon: int = 12, shift: float = 0.0):
         draw,
         shift=FloatSlider(value=shift, min=0.0, max=1.5, step=0.1, description="shift [m]",
                           continuous_update=False, readout_format=".1f"),
-        beacon=Dropdown(options=list(range(len(car.beacons))), value=beacon, description="beacon"))
+        # a slider, not a drop-down: JupyterLab 4.6 takes the arrow keys of a focused
+        # drop-down to move between cells, so a keyboard could not choose a beacon there
+        beacon=IntSlider(value=beacon, min=0, max=len(car.beacons) - 1, step=1,
+                         description="beacon", continuous_update=False))
     widget.holder = holder
-    return widget
+    return keyboard_ready(widget)
 
 
 # ------------------------------------------------------------------ exercise 4a.2's loop

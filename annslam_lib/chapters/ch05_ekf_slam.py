@@ -31,6 +31,7 @@ from ..plots.slam import (CAR_PARK_LIMITS, plot_consistency, plot_correlation,
 from ..plots.blit import Blit, drawn_by
 from ..plots.alt import alt_text, describe
 from ..plots.style import BLUE, DPI, FIG_WIDTH, GREEN, ORANGE, PURPLE, RED, figure, show_in_image
+from ..plots.style import keyboard_ready
 from ..plots.style import notebook_setup as setup
 from ..slam.config import SlamConfig
 from ..slam.runner import initial_pose, run
@@ -305,7 +306,7 @@ def slam_explorer(dataset: Dataset, config: SlamConfig | None = None, *,
     update()
     widget = VBox([*sliders, image, text])
     widget.holder = holder
-    return widget
+    return keyboard_ready(widget)
 
 
 def _turning_shade(ax, t, turning) -> None:

@@ -25,6 +25,7 @@ from ..models.uncertainty import ellipse_curves
 from ..plots.blit import Blit, drawn_by
 from ..plots.alt import alt_text
 from ..plots.style import BLUE, FIG_WIDTH, GREEN, ORANGE, RED, figure, show_png, widget_figure
+from ..plots.style import keyboard_ready
 from ..plots.style import notebook_setup as setup
 from ..slam.results import SlamResult
 
@@ -220,7 +221,7 @@ def run_scrubber(result: SlamResult, gps: Gps, *, start: float | None = None, st
     widget = interactive(draw, t=slider)
     widget.holder = holder
     widget.views = views
-    return widget
+    return keyboard_ready(widget)
 
 
 def map_figure(result: SlamResult, gps: Gps, first_seen, outliers):

@@ -21,6 +21,7 @@ from ..plots.ann import (performance_limits, performance_moving, plot_landmark_e
 from ..plots.blit import Blit
 from ..plots.alt import alt_text
 from ..plots.style import PURPLE, RED, figure, show_png, widget_figure
+from ..plots.style import keyboard_ready
 from ..plots.style import notebook_setup as setup
 
 __all__ = ["setup", "plot_hidden_grid", "loop_mistakes_figure", "landmark_errors_figure",
@@ -98,7 +99,7 @@ def hidden_size_explorer(grid: HiddenSizeGrid, *, hidden: int | None = None, see
     widget.holder = holder
     widget.grid = grid
     widget.view = view                  # the figure the first draw made (plots.blit.Blit)
-    return widget
+    return keyboard_ready(widget)
 
 
 def _view(grid: HiddenSizeGrid, hidden: int, seed: int, title: str) -> Blit:

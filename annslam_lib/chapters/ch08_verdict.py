@@ -28,6 +28,7 @@ from ..paper.figures import (plot_pose_trace, plot_r_scale, plot_transfer, r_sca
 from ..plots.slam import CAR_PARK_LIMITS, plot_true_vs_mapped
 from ..plots.alt import alt_text
 from ..plots.style import BLUE, DPI, FIG_WIDTH, RED, figure, show_in_image
+from ..plots.style import keyboard_ready
 from ..plots.style import notebook_setup as setup
 from ..slam.config import SlamConfig
 
@@ -184,4 +185,4 @@ def r_scale_explorer(dataset: Dataset | None = None, *, sweep: dict | None = Non
     update()
     widget = VBox([slider, image, text])
     widget.holder = holder
-    return widget
+    return keyboard_ready(widget)

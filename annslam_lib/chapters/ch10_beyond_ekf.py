@@ -25,6 +25,7 @@ from ..evaluation.trajectory import trajectory_errors
 from ..models.observation import inverse_observe
 from ..perception import association, jcbb
 from ..plots.style import RED, figure, show_widget_figure, widget_figure
+from ..plots.style import keyboard_ready
 from ..plots.style import notebook_setup as setup
 from ..slam.config import SlamConfig
 from ..slam.runner import run
@@ -398,4 +399,4 @@ def loop_closure_explorer(car: Dataset, problem: gp.GraphProblem, *, drop: float
                                                 description="closures dropped",
                                                 continuous_update=False, readout_format=".2f"))
     widget.holder = holder
-    return widget
+    return keyboard_ready(widget)

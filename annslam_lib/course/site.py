@@ -90,22 +90,27 @@ def _models(state: dict, model_id: str):
         stack += [str(c).removeprefix("IPY_MODEL_") for c in reversed(st.get("children", []))]
 
 
-def widget_pictures(state: dict, model_id: str, image_alt: str | None = None) -> list:
+def widget_pictures(state: dict, model_id: str, image_alt: str | None = None, *,
+                    pictures: bool = True) -> list:
     """The outputs that stand for the widget ``model_id`` on a page without a kernel: the
     pictures its Output widgets hold (with their metadata: the alt text), its Image widgets'
     pictures (alt text: their title, else ``image_alt``: the alt text of the animation's frame
-    at the stored value) and its HTML widgets' text, then one HTML line naming its controls
-    and where they stand. Raises ValueError for a widget whose state was
-    not saved (its page would show nothing)."""
+    at the stored value) and its shown HTML widgets' text, then one HTML line naming its
+    controls and where they stand. With ``pictures=False`` only that line (a page that plays
+    the widget's frames shows its picture and text there). Raises ValueError for a widget
+    whose state was not saved (its page would show nothing)."""
     if model_id not in state:
         raise ValueError(f"widget {model_id[:8]} has no saved state: save the notebook with "
                          "its widget state (the refresh does)")
-    pictures, controls = [], []
+    shown, controls = [], []
     for name, st, model in _models(state, model_id):
+        if name in ("OutputModel", "ImageModel", "HTMLModel") and (
+                not pictures or _hidden(state, st)):
+            continue
         if name == "OutputModel":
             for o in st.get("outputs", []):
                 if "image/png" in o.get("data", {}):
-                    pictures.append(nbformat.v4.new_output(
+                    shown.append(nbformat.v4.new_output(
                         "display_data", data={"image/png": o["data"]["image/png"],
                                               "text/plain": "<Figure>"},
                         metadata=copy.deepcopy(o.get("metadata", {}))))
@@ -113,11 +118,11 @@ def widget_pictures(state: dict, model_id: str, image_alt: str | None = None) ->
             data = next((b["data"] for b in model.get("buffers", [])
                          if b.get("path") == ["value"] and b.get("encoding") == "base64"), None)
             if data:                           # a picture redrawn in place, its title its alt
-                pictures.append(nbformat.v4.new_output(
+                shown.append(nbformat.v4.new_output(
                     "display_data", data={"image/png": data, "text/plain": "<Figure>"},
                     metadata={"image/png": {"alt": st.get("tooltip") or image_alt or ""}}))
         elif name == "HTMLModel" and st.get("value"):
-            pictures.append(nbformat.v4.new_output(   # the widget's own text (escaped there)
+            shown.append(nbformat.v4.new_output(   # the widget's own text (escaped there)
                 "display_data", data={"text/html": st["value"], "text/plain": st["value"]}))
         elif name in _CONTROLS:
             label = st.get("description") or name.removesuffix("Model").lower()
@@ -131,8 +136,15 @@ def widget_pictures(state: dict, model_id: str, image_alt: str | None = None) ->
     words = "; ".join(controls) if controls else "no control"
     note = (f'<p class="{WIDGET_NOTE_CLASS}">In JupyterLab this picture is interactive '
             f"({html.escape(words)}). Open the chapter to move its controls.</p>")
-    return pictures + [nbformat.v4.new_output(
+    return shown + [nbformat.v4.new_output(
         "display_data", data={"text/html": note, "text/plain": note})]
+
+
+def _hidden(state: dict, st: dict) -> bool:
+    """Whether a widget is laid out hidden (``display: none``, e.g. the style sheet of
+    ``plots.style.keyboard_ready``): shown nowhere, so not on the page either."""
+    layout = state.get(str(st.get("layout", "")).removeprefix("IPY_MODEL_"), {})
+    return layout.get("state", {}).get("display") == "none"
 
 
 def player(frames: list, control: str, stem: str, start: str | None = None) -> str:
@@ -157,11 +169,16 @@ def player(frames: list, control: str, stem: str, start: str | None = None) -> s
             f'<pre class="annslam-frame-text">{e(f0["text"])}</pre></figcaption></figure>')
 
 
+#: The cell tag sphinx-book-theme widens a cell by (over the page's contents column).
+FULL_WIDTH = "full-width"
+
+
 def site_notebook(instructor, name: str = "notebook"):
     """The page version of an instructor notebook: the student version's cells (its
     metadata kept to the release's keys), with the instructor notebook's stored outputs on
     every code cell the release leaves unchanged, and each widget replaced by
-    :func:`widget_pictures`, followed by its :func:`player` when its frames are stored."""
+    :func:`widget_pictures`, or, when its frames are stored, by its :func:`player` (which
+    starts on the stored picture) and the line naming its controls."""
     page = student_version(instructor, name)
     stem = Path(name).stem
     state = _state(instructor)
@@ -179,13 +196,19 @@ def site_notebook(instructor, name: str = "notebook"):
         for o in src.get("outputs", []):
             view = o.get("data", {}).get(_WIDGET_VIEW) if o.get("output_type") in (
                 "display_data", "execute_result") else None
-            outs += (widget_pictures(state, view["model_id"], image_alt) if view
+            outs += (widget_pictures(state, view["model_id"], image_alt,
+                                     pictures=not anim.get("frames")) if view
                      else [copy.deepcopy(o)])
         if anim.get("frames"):
             note = player(anim["frames"], anim["animate"]["control"], stem, start)
             outs.append(nbformat.v4.new_output("display_data", data={
                 "text/html": note, "text/plain": "an animation of the widget"}))
         cell.outputs, cell.execution_count = outs, src.get("execution_count")
+        if any("image/png" in o.get("data", {}) or "text/html" in o.get("data", {}) and
+               PLAYER_CLASS in o["data"]["text/html"] for o in outs):
+            # a figure is drawn for the notebook's ~1000 px: the theme's full-width cell
+            # gives it the page's contents column too, near its own size
+            cell.metadata.setdefault("tags", []).append(FULL_WIDTH)
     return page
 
 
@@ -296,14 +319,20 @@ html_context = {{"default_mode": "auto"}}
 
 # A focus ring on every control reached by keyboard (the theme's own ring is transparent on
 # some buttons): 3 px of the course's blue, at least 3:1 against both of the theme's
-# backgrounds (WCAG 2.1's 1.4.11).
+# backgrounds (WCAG 2.1's 1.4.11). While a full-width figure is in view the theme folds the
+# page's contents into a bar that opens on hover: it opens for the keyboard too (a link
+# with the focus is never hidden), and its sign is a character (the theme's is an icon-font
+# glyph the site does not load).
 _CSS = """\
 .annslam-widget-note { font-style: italic; }
 .annslam-player img { max-width: 100%; height: auto; }
 .annslam-player figcaption { display: flex; flex-wrap: wrap; gap: 0.5em 1em; align-items: center; }
 .annslam-player input[type=range] { width: 14em; max-width: 60vw; }
-.annslam-frame-text { flex-basis: 100%; white-space: pre-wrap; margin: 0; }
+.annslam-frame-text { flex-basis: 100%; white-space: pre-wrap; margin: 0; text-align: left; }
 :focus-visible { outline: 3px solid #0072B2 !important; outline-offset: 2px; }
+.bd-sidebar-secondary.hide:not(:hover) .onthispage:after { content: "\\25BE"; font-family: inherit; }
+.bd-sidebar-secondary.hide:focus-within { max-height: none !important; overflow-y: auto !important; }
+.bd-sidebar-secondary.hide:focus-within nav.page-toc { opacity: 1 !important; }
 """
 
 

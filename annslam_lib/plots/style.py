@@ -19,7 +19,7 @@ from matplotlib.figure import Figure
 from . import alt
 
 __all__ = ["notebook_setup", "axes", "figure", "widget_figure", "show_widget_figure", "show_png",
-           "show_in_image", "render_png",
+           "show_in_image", "render_png", "keyboard_ready", "FOCUS_CLASS",
            "layout_signature",
            "BEACON_STYLE", "FIG_WIDTH", "DPI", "PALETTE", "BLUE", "ORANGE", "GREEN", "RED",
            "PURPLE", "SKY", "BLACK", "GREY"]
@@ -86,6 +86,33 @@ def show_in_image(image, png: bytes, alt_text: str) -> None:
                          f"{alt.MIN_LENGTH} characters: what it shows), got {alt_text!r}")
     image.alt_text = alt_text
     image.value = png
+
+
+#: The class :func:`keyboard_ready` gives a widget's box, which its focus style selects.
+FOCUS_CLASS = "annslam-keys"
+# ipywidgets 8.1 draws no focus indicator on its slider handles ("outline: none") nor on its
+# drop-downs ("outline: none !important"), so a keyboard user cannot see where they are
+# (WCAG 2.4.7). One outline for every focusable part of a course widget, in JupyterLab's own
+# accent colour (3:1 or more against its light and dark backgrounds), outside the control.
+_FOCUS_CSS = (f".{FOCUS_CLASS} :focus-visible {{outline: 2px solid var(--jp-brand-color1, "
+              f"#1976d2) !important; outline-offset: 2px !important}}")
+
+
+def keyboard_ready(widget):
+    """Give a chapter's widget a visible keyboard focus: every control of it (slider handles,
+    readouts, drop-downs, check boxes) shows an outline while the keyboard is on it. A style
+    sheet travels with the widget as a hidden ``HTML`` child, so it works wherever the widget
+    is shown live (JupyterLab, Notebook 7, VS Code), before ``widget.out`` for an
+    ``interactive`` (whose output stays the last child). Returns ``widget``."""
+    from ipywidgets import HTML, Layout
+
+    sheet = HTML(f"<style>{_FOCUS_CSS}</style>", layout=Layout(display="none"))
+    kids = list(widget.children)
+    out = getattr(widget, "out", None)
+    at = next((i for i, k in enumerate(kids) if k is out), len(kids))
+    widget.children = tuple(kids[:at] + [sheet] + kids[at:])
+    widget.add_class(FOCUS_CLASS)
+    return widget
 
 
 #: Axes positions of the widget figures laid out so far, by :func:`layout_signature`.
