@@ -63,6 +63,14 @@ def test_each_student_runs_as_themselves_in_a_private_home_with_the_course(class
     assert (user, mode, threads) == (a, "0o700", "1")
     assert data == str(h.layout.data) and prefix == str(h.layout.env)
     assert lib.startswith(str(h.layout.env)) and "site-packages" in lib   # the wheel
+    # the kernel is in the student's control group (hub.limits): memory, processes, CPU
+    groups = h.api.run(a, "print(open('/proc/self/cgroup').read())")
+    assert groups.error is None, groups
+    lines = groups.stdout.split()
+    mine = [ln for ln in lines if ln.endswith(f"/annslam-hub/{a}")]
+    v2 = any(ln.startswith("0::/annslam-hub/") for ln in mine)
+    assert v2 or {c for ln in mine for c in ln.split(":")[1].split(",")} >= {
+        "memory", "pids", "cpu"}, lines
 
 
 def test_a_students_kernel_cannot_read_or_change_another_students_files(class_hub):

@@ -236,7 +236,11 @@ def test_the_hub_listens_on_loopback_and_lets_in_only_the_class(tmp_path):
     assert c.Authenticator.allowed_users == {"alice", "bob"}
     assert c.Authenticator.admin_users == {"instructor"}
     assert c.JupyterHub.authenticator_class == "shared-password"
-    assert c.JupyterHub.spawner_class == "localprocess"
+    from jupyterhub.spawner import LocalProcessSpawner
+
+    assert issubclass(c.JupyterHub.spawner_class, LocalProcessSpawner)
+    assert c.JupyterHub.spawner_class.__name__ == "LimitedSpawner"       # limits enforced
+    assert (c.Spawner.mem_limit, c.Spawner.cpu_limit) == (1536 * 1024**2, 1.0)
     assert c.Spawner.cmd[:4] == [str(tmp_path / "student-env" / "bin" / "python"), "-m",
                                  "annslam_lib", "singleuser"]
     assert str(tmp_path / "state") in c.JupyterHub.db_url

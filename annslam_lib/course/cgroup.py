@@ -1,4 +1,5 @@
-"""A control group per sandbox: memory and processes bounded for the whole submission.
+"""A control group per sandbox (or per student's server on the class hub): memory,
+processes and, if asked, CPU bounded for the whole submission.
 
 ``setrlimit`` bounds each process (its address space, the processes of its user); a
 submission that forks spreads past any one of them (256 processes of 4 GB each). A control
@@ -77,31 +78,40 @@ def _write(path: Path, value) -> None:
     path.write_text(str(value))
 
 
-def _v2(memory: int, processes: int) -> Group:
-    parent = ROOT / PARENT
+#: The scheduler's period for a CPU limit, in microseconds (the kernel's default).
+CPU_PERIOD = 100_000
+
+
+def _v2(memory: int, processes: int, cpus, parent: str, name: str) -> Group:
+    want = {"memory", "pids"} | ({"cpu"} if cpus else set())
     controllers = set((ROOT / "cgroup.controllers").read_text().split())
-    if not {"memory", "pids"} <= controllers:
-        raise OSError(f"cgroup v2 without the memory and pids controllers ({sorted(controllers)})")
-    if not {"memory", "pids"} <= set((ROOT / "cgroup.subtree_control").read_text().split()):
-        _write(ROOT / "cgroup.subtree_control", "+memory +pids")
-    parent.mkdir(exist_ok=True)
-    if not {"memory", "pids"} <= set((parent / "cgroup.subtree_control").read_text().split()):
-        _write(parent / "cgroup.subtree_control", "+memory +pids")
-    g = parent / uuid.uuid4().hex
+    if not want <= controllers:
+        raise OSError(f"cgroup v2 without the {' and '.join(sorted(want))} controllers "
+                      f"({sorted(controllers)})")
+    enable = " ".join(f"+{c}" for c in sorted(want))
+    if not want <= set((ROOT / "cgroup.subtree_control").read_text().split()):
+        _write(ROOT / "cgroup.subtree_control", enable)
+    top = ROOT / parent
+    top.mkdir(exist_ok=True)
+    if not want <= set((top / "cgroup.subtree_control").read_text().split()):
+        _write(top / "cgroup.subtree_control", enable)
+    g = top / name
     g.mkdir()
     _write(g / "memory.max", memory)
     if (g / "memory.swap.max").exists():
         _write(g / "memory.swap.max", 0)
     _write(g / "pids.max", processes)
+    if cpus:
+        _write(g / "cpu.max", f"{round(cpus * CPU_PERIOD)} {CPU_PERIOD}")
     return Group([g], 2)
 
 
-def _v1(memory: int, processes: int) -> Group:
-    name = uuid.uuid4().hex
-    mem, pids = ROOT / "memory" / PARENT / name, ROOT / "pids" / PARENT / name
-    mem.mkdir(parents=True)
+def _v1(memory: int, processes: int, cpus, parent: str, name: str) -> Group:
+    mem, pids = ROOT / "memory" / parent / name, ROOT / "pids" / parent / name
+    folders = [mem, pids] + ([ROOT / "cpu" / parent / name] if cpus else [])
     try:
-        pids.mkdir(parents=True)
+        for f in folders:
+            f.mkdir(parents=True)
         _write(mem / "memory.limit_in_bytes", memory)
         if (mem / "memory.memsw.limit_in_bytes").exists():
             _write(mem / "memory.memsw.limit_in_bytes", memory)
@@ -109,28 +119,37 @@ def _v1(memory: int, processes: int) -> Group:
             with contextlib.suppress(OSError):
                 _write(mem / "memory.swappiness", 0)
         _write(pids / "pids.max", processes)
+        if cpus:
+            _write(folders[2] / "cpu.cfs_period_us", CPU_PERIOD)
+            _write(folders[2] / "cpu.cfs_quota_us", round(cpus * CPU_PERIOD))
     except OSError:
-        for f in (mem, pids):
+        for f in folders:
             with contextlib.suppress(OSError):
                 f.rmdir()
         raise
-    return Group([mem, pids], 1)
+    return Group(folders, 1)
 
 
-def make(memory: int, processes: int) -> tuple[Group | None, str]:
-    """A new control group bounding ``memory`` bytes and ``processes`` tasks, and '' ; or
-    None and why none can be made here."""
+def make(memory: int, processes: int, cpus: float | None = None, *, parent: str = PARENT,
+         name: str | None = None) -> tuple[Group | None, str]:
+    """A new control group bounding ``memory`` bytes, ``processes`` tasks and, with
+    ``cpus``, the CPU time to that many processors' worth, and '' ; or None and why none
+    can be made here. It is ``parent/name`` (a fresh name by default) in each hierarchy."""
     if os.geteuid() != 0:
         return None, "the grader does not run as root"
+    if cpus is not None and not cpus > 0:
+        raise ValueError(f"cpus must be a positive number of processors, got {cpus!r}")
+    name = name or uuid.uuid4().hex
     errors = []
     if (ROOT / "cgroup.controllers").exists():
         try:
-            return _v2(memory, processes), ""
+            return _v2(memory, processes, cpus, parent, name), ""
         except OSError as e:
             errors.append(f"cgroup v2: {e}")
-    if (ROOT / "memory" / "memory.limit_in_bytes").exists() and (ROOT / "pids").is_dir():
+    if ((ROOT / "memory" / "memory.limit_in_bytes").exists() and (ROOT / "pids").is_dir()
+            and (not cpus or (ROOT / "cpu" / "cpu.cfs_quota_us").exists())):
         try:
-            return _v1(memory, processes), ""
+            return _v1(memory, processes, cpus, parent, name), ""
         except OSError as e:
             errors.append(f"cgroup v1: {e}")
     return None, "; ".join(errors) or "no cgroup v2 and no cgroup v1 memory and pids controllers"

@@ -472,6 +472,8 @@ def _class(args: argparse.Namespace) -> int:
 
     try:
         layout = HubLayout.from_env()
+        if args.chapter is None and args.action != "export":
+            raise HubError("name the chapter, e.g. 03_observation")
         try:
             ACTIONS[args.action](layout, args.chapter)
         finally:                     # what root wrote there, back to the instructor's account
@@ -489,9 +491,11 @@ def _class(args: argparse.Namespace) -> int:
 
 def _add_class(sub) -> None:
     p = sub.add_parser("class", help="the instructor's steps on the class hub (as root): "
-                       "release, collect, grade, feedback of one chapter")
-    p.add_argument("action", choices=["release", "collect", "grade", "feedback"])
-    p.add_argument("chapter", help="a notebook's name without .ipynb, e.g. 03_observation")
+                       "release, collect, grade, feedback of one chapter; export the "
+                       "gradebook for the LMS")
+    p.add_argument("action", choices=["release", "collect", "grade", "feedback", "export"])
+    p.add_argument("chapter", nargs="?", help="a notebook's name without .ipynb, e.g. "
+                   "03_observation (export: every graded chapter when left out)")
     p.add_argument("--instructor", default="instructor", metavar="NAME",
                    help="the instructor's account, owner of the course folder (default "
                    "instructor)")

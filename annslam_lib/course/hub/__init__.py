@@ -6,12 +6,18 @@ Its modules:
   studies, proxy) and JupyterHub started (``python -m annslam_lib hub``)
 - ``config``: JupyterHub's settings for the class, what ``hub/jupyterhub_config.py`` applies
 - ``classroom``: the instructor's steps through nbgrader's exchange (release, collect, grade,
-  feedback: ``./course.sh class``)
+  feedback, export: ``./course.sh class``)
+- ``deadlines``: due dates, late policies and extensions (``course/course.toml``), and which
+  submission of each student is collected
+- ``gradebook``: the class's grades as CSV files for Canvas and Moodle
+- ``limits``: each student's server within memory, CPU and process limits (a control group
+  per student, joined before the server runs)
 - ``client``: a running hub driven over its REST API as an admin service (the hub's tests
   and load benchmark)
 
-Isolation is the operating system's: the hub runs as root and JupyterHub's default
-``LocalProcessSpawner`` starts each student's server as that student's own Unix account
+Isolation is the operating system's: the hub runs as root and JupyterHub's
+``LocalProcessSpawner`` (with its limits enforced: ``limits``) starts each student's server
+as that student's own Unix account
 (created when the server first starts, so a start through the REST API works as a login
 does; home mode 0700, so no other student's kernel can read it). ``SimpleLocalProcessSpawner``
 is refused: it runs every server as the hub's user, so every student could read every home.
@@ -51,7 +57,7 @@ __all__ = ["HubError", "HubLayout", "ENV_DIR", "COURSE_ID", "MARK", "read_class"
            "check_name", "account_status", "ensure_account", "give_course", "running_hub",
            "write_role_config", "server_env", "STUDENT_DISABLED", "INSTRUCTOR_DISABLED",
            "system_python", "reachable_by_others", "open_to_all",
-           "setup", "config", "classroom", "client"]
+           "setup", "config", "classroom", "client", "deadlines", "gradebook", "limits"]
 
 ENV_DIR = _settings.HUB_DIR
 DEFAULT_DIR = _settings.HUB_DIR_DEFAULT

@@ -2,36 +2,47 @@
 
     ./course.sh class release CHAPTER    the chapter's student version, to every student's
                                          Assignments panel (nbgrader release_assignment)
-    ./course.sh class collect CHAPTER    each student's latest submission, into
-                                         course/submitted/ (nbgrader collect)
+    ./course.sh class collect CHAPTER    each student's latest submission (or the one the
+                                         late policy takes), into course/submitted/
     ./course.sh class grade CHAPTER      the course's sandboxed grader on every collected
                                          submission: scores in course/grades/CHAPTER.json,
                                          one feedback page per student
     ./course.sh class feedback CHAPTER   the feedback pages back through the exchange
                                          (nbgrader release_feedback); each student fetches
                                          theirs in the Assignments panel
+    ./course.sh class export [CHAPTER]   the gradebook of every graded chapter (or one) as
+                                         CSV for Canvas and Moodle (:mod:`.gradebook`)
+
+With a due date for the chapter in ``course/course.toml`` (:mod:`.deadlines`), ``release``
+writes it into the chapter's first cell and ``collect`` takes each student's submission by the
+late policy, itself, saying which it took for whom (``course/grades/CHAPTER-collected.json``);
+``grade`` and ``export`` apply the share of points the policy keeps.
 
 Run as root on the hub's machine, with ``ANNSLAM_HUB_DIR`` as for the hub. ``CHAPTER`` is a
 notebook's name without ``.ipynb`` (``03_observation``); it is the nbgrader assignment's
 name too. Grading is the course's grader, never ``nbgrader autograde``: there the checks run
 in the student's own kernel, which the student's code can disarm.
 
-A submission in the exchange whose folder belongs to another account than the student it
-names (one student submitting as another) is not collected: it is moved to
-``course/rejected/`` and named.
+A submission in the exchange that anything but its student's own plain files and folders
+make up (a folder or file of another account: one student submitting as another; a symbolic
+link, which the collecting root would follow to any file of the machine; a hard link; a
+device or pipe) is not collected: it is moved to ``course/rejected/`` and named.
 """
 from __future__ import annotations
 
 import html
+import json
 import os
 import pwd
 import shutil
+import stat
 import subprocess
 from pathlib import Path
 
-from . import COURSE_ID, HubError, HubLayout
+from . import COURSE_ID, HubError, HubLayout, deadlines, gradebook
 
-__all__ = ["release", "collect", "grade", "feedback", "feedback_page", "ACTIONS"]
+__all__ = ["release", "collect", "grade", "feedback", "export", "feedback_page", "unsafe",
+           "ACTIONS"]
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -65,7 +76,13 @@ def release(layout: HubLayout, chapter: str) -> Path:
     src = _notebook(chapter)
     folder = layout.course / "release" / chapter
     shutil.rmtree(folder, ignore_errors=True)
-    write_release([src], folder)
+    written = write_release([src], folder)[0]
+    policy = _policies(layout).get(chapter)
+    if policy is not None:                       # the due date, above the chapter's title
+        import nbformat
+        nb = nbformat.read(written, as_version=4)
+        nb.cells.insert(0, nbformat.v4.new_markdown_cell(deadlines.due_text(policy)))
+        nbformat.write(nb, written)
     source = layout.course / "source" / chapter
     source.mkdir(parents=True, exist_ok=True)
     os.chmod(layout.course / "source", 0o700)            # solutions: the instructor's only
@@ -74,38 +91,116 @@ def release(layout: HubLayout, chapter: str) -> Path:
     return folder / src.name
 
 
+def _owner(st) -> str:
+    try:
+        return pwd.getpwuid(st.st_uid).pw_name
+    except KeyError:
+        return f"uid {st.st_uid}"
+
+
+def unsafe(entry: Path, student: str) -> str | None:
+    """Why the exchange entry ``entry`` may not be collected as ``student``'s (module
+    docstring), or None: every part of it must be a plain folder or a plain file with one
+    link, owned by ``student``. Nothing in it is followed or opened."""
+    parts = [entry]
+    if not entry.is_symlink() and entry.is_dir():
+        for root, dirs, files in os.walk(entry):
+            parts += [Path(root, n) for n in dirs + files]
+    for part in parts:
+        st = part.lstat()
+        where = part.relative_to(entry.parent)
+        if stat.S_ISLNK(st.st_mode):
+            return f"{where} is a symbolic link"
+        if not (stat.S_ISDIR(st.st_mode) or stat.S_ISREG(st.st_mode)):
+            return f"{where} is not a plain file or folder"
+        if stat.S_ISREG(st.st_mode) and st.st_nlink > 1:
+            return f"{where} is a hard link ({st.st_nlink} names)"
+        if _owner(st) != student:
+            return f"{where} names {student} but belongs to {_owner(st)}"
+    return None
+
+
 def _forged(layout: HubLayout, chapter: str) -> list[str]:
-    """Move aside every inbound submission of ``chapter`` not owned by the student it names."""
+    """Move aside every inbound submission of ``chapter`` that is not plainly its student's
+    own (:func:`unsafe`)."""
     inbound = layout.exchange / COURSE_ID / "inbound"
     said = []
     for entry in sorted(inbound.glob(f"*+{chapter}+*")) if inbound.is_dir() else []:
-        student = entry.name.split("+", 1)[0]
-        try:
-            owner = pwd.getpwuid(entry.lstat().st_uid).pw_name
-        except KeyError:
-            owner = f"uid {entry.lstat().st_uid}"
-        if owner != student or entry.is_symlink():
+        why = unsafe(entry, entry.name.split("+", 1)[0])
+        if why:
             dest = layout.course / "rejected" / entry.name
             dest.parent.mkdir(parents=True, exist_ok=True)
             shutil.move(str(entry), dest)
-            said.append(f"{entry.name}: names {student} but was submitted by {owner}; moved "
-                        f"to {dest}, not collected")
+            said.append(f"{entry.name}: {why}; moved to {dest}, not collected")
+    return said
+
+
+def _policies(layout: HubLayout) -> dict:
+    try:
+        return deadlines.load(layout.course / deadlines.CONFIG_NAME)
+    except deadlines.DeadlineError as e:
+        raise HubError(str(e)) from None
+
+
+def _links(folder: Path) -> list[str]:
+    return [os.path.join(root, n) for root, dirs, files in os.walk(folder)
+            for n in dirs + files if os.path.islink(os.path.join(root, n))]
+
+
+def _collect(layout: HubLayout, chapter: str, policy) -> list[str]:
+    """Each student's submission that counts under ``policy`` (None: their last), copied
+    into ``course/submitted`` (never following a link: nbgrader's own collect would follow
+    one a student plants between the check and the copy); the choices in
+    ``course/grades/CHAPTER-collected.json``."""
+    inbound = layout.exchange / COURSE_ID / "inbound"
+    subs = deadlines.inbound(inbound, chapter)
+    choices = deadlines.choose(policy, subs) if policy else deadlines.latest(subs)
+    said, record = [], []
+    for c in choices:
+        dest = layout.course / "submitted" / c.student / chapter
+        shutil.rmtree(dest, ignore_errors=True)
+        if c.submission is not None:
+            why = unsafe(c.submission.folder, c.student)    # again: it may have changed since
+            if why:
+                raise HubError(f"{c.submission.folder.name}: {why}; collect again")
+            shutil.copytree(c.submission.folder, dest, symlinks=True)
+            if _links(dest):                          # planted between the check and the copy
+                shutil.rmtree(dest)
+                raise HubError(f"{c.submission.folder.name}: a symbolic link appeared in it "
+                               "while it was collected; not collected")
+        taken = c.submission.at.isoformat(timespec="seconds") if c.submission else None
+        claim = c.submission.claimed if c.submission else None
+        if claim and abs((c.submission.at - claim).total_seconds()) > 120:
+            note = f" (its name claims {claim.isoformat(timespec='seconds')})"
+        else:
+            note = ""
+        said.append(f"{c.student}: {('submitted ' + taken) if taken else 'nothing taken'}"
+                    f"{note}: {c.why}")
+        record.append({"student": c.student, "submission": taken, "days_late": c.days_late,
+                       "factor": c.factor, "why": c.why})
+    grades = layout.course / "grades"
+    grades.mkdir(exist_ok=True)
+    os.chmod(grades, 0o700)
+    (grades / f"{chapter}-collected.json").write_text(json.dumps(record, indent=1))
     return said
 
 
 def collect(layout: HubLayout, chapter: str) -> list[str]:
-    """Each student's latest submission of ``chapter`` into ``course/submitted``."""
+    """Each student's latest submission of ``chapter`` into ``course/submitted``, or with a
+    due date the one its late policy takes (module docstring)."""
     _notebook(chapter)
     said = _forged(layout, chapter)
+    said += _collect(layout, chapter, _policies(layout).get(chapter))
     for line in said:
         print(f"== {line}", flush=True)
-    _nbgrader(layout, "collect", chapter, "--update")
     return said
 
 
-def feedback_page(g) -> str:
+def feedback_page(g, late: dict | None = None) -> str:
     """One student's feedback (a :class:`~.grader.SubmissionGrade`) as a self-contained HTML
-    page. Every text is escaped: messages can quote the student's own output."""
+    page, with what a late policy kept (``late``: the student's entry of
+    ``CHAPTER-collected.json``). Every text is escaped: messages can quote the student's own
+    output."""
     e = html.escape
     rows = "".join(
         f"<tr><td>{e(r.grade_id)}</td><td>{r.points:g} / {r.max_points:g}</td>"
@@ -113,6 +208,9 @@ def feedback_page(g) -> str:
     notes = "".join(f"<li>{e(n)}</li>" for n in [*g.notes, *g.errors])
     head = (f"<p><b>Score: {g.score:g} / {g.max_score:g}</b></p>" if g.graded else
             f"<p><b>Not graded</b>: {e(g.reason)}</p>")
+    if g.graded and late and late.get("factor", 1.0) < 1.0:
+        head += (f"\n<p><b>After the late policy: {g.score * late['factor']:g} / "
+                 f"{g.max_score:g}</b> ({e(late['why'])})</p>")
     return ("<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>"
             "<meta name='viewport' content='width=device-width, initial-scale=1'><title>"
             f"{e(g.assignment or '')} feedback</title></head><body>\n"
@@ -142,11 +240,14 @@ def grade(layout: HubLayout, chapter: str, *, log=print) -> list:
     results = grade_batch(subs, instructor_dir=ROOT / "notebooks",
                           json_path=grades / f"{chapter}.json", log=log,
                           hide=[layout.exchange, layout.course, layout.state])
+    collected = grades / f"{chapter}-collected.json"
+    late = ({c["student"]: c for c in json.loads(collected.read_text())}
+            if collected.exists() else {})
     for g, sub in zip(results, subs):
         student = sub.parents[1].name
         out = layout.course / "feedback" / student / chapter
         out.mkdir(parents=True, exist_ok=True)
-        (out / f"{chapter}.html").write_text(feedback_page(g))
+        (out / f"{chapter}.html").write_text(feedback_page(g, late.get(student)))
         for name in ("timestamp.txt", "submission_secret.txt"):
             if (sub.parent / name).exists():
                 shutil.copyfile(sub.parent / name, out / name)
@@ -161,4 +262,42 @@ def feedback(layout: HubLayout, chapter: str) -> None:
     _nbgrader(layout, "release_feedback", chapter)
 
 
-ACTIONS = {"release": release, "collect": collect, "grade": grade, "feedback": feedback}
+def export(layout: HubLayout, chapter: str | None = None, *, layouts=gradebook.LAYOUTS,
+           log=print) -> list[Path]:
+    """The gradebook of ``chapter`` (None: every chapter graded so far, in the course's
+    order) as one CSV file per LMS layout in ``course/grades/``; the students are the
+    roster's (``course/roster.csv``) and everyone graded or collected. Returns the files."""
+    grades = layout.course / "grades"
+    if chapter is not None:
+        _notebook(chapter)
+        chapters = [chapter]
+    else:
+        chapters = [p.stem for p in sorted((ROOT / "notebooks").glob("*.ipynb"))
+                    if (grades / f"{p.stem}.json").exists()]
+    if not chapters:
+        raise HubError(f"nothing graded yet in {grades}: run ./course.sh class grade CHAPTER")
+    try:
+        roster = gradebook.read_roster(layout.course / "roster.csv")
+        seen = set(roster)
+        for ch in chapters:
+            for name in (f"{ch}.json", f"{ch}-collected.json"):
+                if (grades / name).exists():
+                    seen |= {r["student"] for r in json.loads((grades / name).read_text())}
+        rows, possible = gradebook.gradebook(grades, sorted(seen), chapters)
+        files = []
+        for lms in layouts:
+            path = grades / f"export-{lms}.csv"
+            path.write_text(gradebook.write(rows, possible, lms, roster), encoding="utf-8")
+            files.append(path)
+    except (gradebook.GradebookError, ValueError) as e:
+        raise HubError(str(e)) from None
+    for r in rows:
+        for note in r.notes:
+            log(f"== {r.student}: {note}")
+    log(f"== {len(rows)} students, {len(chapters)} assignment(s): "
+        + ", ".join(str(f) for f in files))
+    return files
+
+
+ACTIONS = {"release": release, "collect": collect, "grade": grade, "feedback": feedback,
+           "export": export}

@@ -14,8 +14,10 @@ Swapping the parts a university changes:
   ``oauthenticator.GenericOAuthenticator`` (OAuth/OpenID Connect) or ``ltiauthenticator``'s
   LTI 1.3 authenticator (from an LMS), keeping ``c.Authenticator.allowed_users`` from the
   class file.
-- **Spawner.** ``LocalProcessSpawner`` (the default) with one Unix account per student is
-  the isolation on one machine. For Docker, ``dockerspawner.DockerSpawner`` with the image of
+- **Spawner.** ``LocalProcessSpawner`` with one Unix account per student is the isolation
+  on one machine, its memory and CPU limits enforced by a control group per student
+  (:mod:`.limits`; change them with ``c.Spawner.mem_limit``, ``c.Spawner.cpu_limit`` and
+  ``c.LimitedSpawner.processes`` in ``hub/jupyterhub_config.py``). For Docker, ``dockerspawner.DockerSpawner`` with the image of
   ``hub/z2jh/Dockerfile`` (its ``cmd`` is the image's; mount the data read-only at
   ``/srv/annslam/data`` and the exchange at ``/srv/annslam/exchange``, and give each student
   a uid of their own, as ``hub/z2jh/config.yaml`` does); for a cluster, Zero to JupyterHub
@@ -28,7 +30,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ... import _settings
-from . import HubError, HubLayout, ensure_account, give_course, read_class, server_env
+from . import HubError, HubLayout, ensure_account, give_course, limits, read_class, server_env
 
 __all__ = ["configure", "check_spawner", "pre_spawn", "REFUSED_SPAWNERS", "SETTINGS"]
 
@@ -83,7 +85,10 @@ def configure(c, env=None) -> None:
     c.Authenticator.allowed_users = set(students)
     c.Authenticator.admin_users = {instructor}
 
-    c.JupyterHub.spawner_class = "localprocess"
+    # LocalProcessSpawner with its memory, CPU and process limits enforced (limits)
+    c.JupyterHub.spawner_class = limits.spawner_class()
+    c.Spawner.mem_limit = limits.DEFAULTS.memory
+    c.Spawner.cpu_limit = limits.DEFAULTS.cpus
     c.Spawner.cmd = [str(layout.env / "bin" / "python"), "-m", "annslam_lib", "singleuser",
                      "--release", str(layout.release), "--"]
     c.Spawner.default_url = "/lab"

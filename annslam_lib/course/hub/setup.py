@@ -166,6 +166,17 @@ def check_grading() -> None:
                        f"(./course.sh class grade would refuse): {why}")
 
 
+def check_limits() -> None:
+    """Each student's server runs within memory, CPU and process limits (``limits``):
+    refuse to start a hub on a machine where they cannot be enforced."""
+    from .limits import check
+
+    why = check()
+    if why:
+        raise HubError(f"{why} (the hub needs root and the cgroup memory, pids and cpu "
+                       "controllers)")
+
+
 def warm_class_studies(layout: HubLayout, notebooks: Path | None = None) -> None:
     """The class's study cache: Run All of every chapter once, by the students' own
     environment with a student server's settings (the same library code and BLAS threads,
@@ -243,6 +254,7 @@ def start(layout: HubLayout, class_file, *, port: int = 8000,
     env = dict(os.environ if env is None else env)
     check_private()
     check_grading()
+    check_limits()
     students = prepare(layout, class_file, instructor, studies=studies)
     env.update(passwords(layout, env))
     env.update({_settings.HUB_DIR: str(layout.root),
