@@ -328,3 +328,64 @@ def _class_chapter(h, action: str, chapter: str) -> None:
     out = subprocess.run([sys.executable, "-m", "annslam_lib", "class", action, chapter],
                          env=env, capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, f"class {action}: {out.stdout[-3000:]}\n{out.stderr[-3000:]}"
+
+
+def _pull(h, student: str, repo: str, branch: str) -> str:
+    """nbgitpuller's pull, as its link's page starts it (the event stream it reads), in the
+    student's server; the stream's text."""
+    import urllib.parse
+    import urllib.request
+
+    query = urllib.parse.urlencode({"repo": repo, "branch": branch, "targetpath": "annslam"})
+    req = urllib.request.Request(f"{h.url}/user/{student}/git-pull/api?{query}",
+                                 headers={"Authorization": f"token {h.token}"})
+    with urllib.request.urlopen(req, timeout=120) as r:
+        return r.read().decode()
+
+
+def test_an_nbgitpuller_link_pulls_the_published_release_and_keeps_the_students_edit(class_hub):
+    """The release published to a git repository served on 127.0.0.1 (git daemon); a
+    student's server pulls it as the course's nbgitpuller link makes it, the student edits a
+    chapter, a new release adds one, and a second pull brings it without touching the edit."""
+    import socket
+
+    import nbformat
+    from annslam_lib.course import publish
+
+    h, (_, _, c) = class_hub
+    served = h.layout.root / "test-release"
+    shutil.rmtree(served, ignore_errors=True)
+    served.mkdir(mode=0o755)
+    subprocess.run(["git", "init", "--quiet", "--bare", str(served / "release.git")], check=True)
+    chapters = [ROOT / "notebooks" / f"{n}.ipynb" for n in ("01_kinematics", "02_laser_offset")]
+    publish.publish(str(served / "release.git"), "fall", chapters[:1])
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    daemon = subprocess.Popen(["git", "daemon", "--reuseaddr", "--export-all", "--listen=127.0.0.1",
+                               f"--port={port}", f"--base-path={served}", str(served)],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        repo = f"git://127.0.0.1:{port}/release.git"
+        h.api.start_server(c)
+        first = _pull(h, c, repo, "fall")
+        assert '"phase": "finished"' in first, first[-800:]
+        status, model = h.api.request("GET", f"/user/{c}/api/contents/annslam/01_kinematics.ipynb")
+        assert status == 200
+        nb = nbformat.from_dict(model["content"])
+        nb.cells.append(nbformat.v4.new_markdown_cell("my own note on the axle speed"))
+        status, _ = h.api.request("PUT", f"/user/{c}/api/contents/annslam/01_kinematics.ipynb",
+                                  {"type": "notebook", "format": "json", "content": nb})
+        assert status == 200
+        publish.publish(str(served / "release.git"), "fall", chapters)      # adds chapter 02
+        second = _pull(h, c, repo, "fall")
+        assert '"phase": "finished"' in second, second[-800:]
+        status, listing = h.api.request("GET", f"/user/{c}/api/contents/annslam")
+        assert sorted(i["name"] for i in listing["content"]) == [
+            "01_kinematics.ipynb", "02_laser_offset.ipynb", "README.md"]
+        status, model = h.api.request("GET", f"/user/{c}/api/contents/annslam/01_kinematics.ipynb")
+        assert model["content"]["cells"][-1]["source"] == "my own note on the axle speed"
+    finally:
+        daemon.terminate()
+        daemon.wait(timeout=10)
+        shutil.rmtree(served, ignore_errors=True)

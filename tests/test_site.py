@@ -247,8 +247,7 @@ def test_each_chapter_has_its_launch_links(built, path):
     else:
         assert colab == [f"https://colab.research.google.com/github/example-course/"
                          f"annslam-release/blob/fall-2027/{path.name}"]
-        assert 'pip install "annslam @ git+https://github.com/example-course/annslam@v0.1.0"' \
-            in text
+        assert "the chapter's first cell installs the course's library there" in text
 
 
 def test_launch_links_refuse_what_is_not_an_address_a_ref_or_a_chapter():

@@ -4,6 +4,7 @@
 - ``site``: the course as a static website, read from the stored outputs
 - ``site_render``: the website's notebook renderer (pictures keep their alt text)
 - ``launch``: links that open a chapter on a JupyterHub (nbgitpuller), Binder or Colab
+- ``publish``: the student release as a branch of a git repository, for those links to pull
 - ``workspace``: a student's own copy of the course, never overwritten
 - ``pacing``: how long each chapter takes a student, estimated from the notebooks
 - ``grader``: scores from the instructor's notebook, decided outside the student's code
@@ -12,7 +13,8 @@
 - ``integrity``: what the grader loads and watches (its bytecode, the course's files), inert
   reports
 - ``sandbox``: the kernel that runs student code (bubblewrap, no privilege, limits, time-outs)
-- ``cgroup``: a control group per sandbox, bounding its processes' memory and number together
+- ``cgroup``: a control group per sandbox (or student's server), bounding its processes'
+  memory, number and CPU together
 - ``confine``: the sandbox's launcher (limits, the drop of privilege, the system-call filter)
 - ``codec``: data, never code, between the grader and that kernel
 - ``kernel_side``: runs inside the sandboxed kernel: the grader's calls of the student's
@@ -25,6 +27,6 @@
 - ``cli``: ``python -m annslam_lib ...``
 """
 
-__all__ = ["release", "site", "site_render", "launch", "workspace", "pacing", "grader", "plan", "similarity", "integrity",
+__all__ = ["release", "site", "site_render", "launch", "publish", "workspace", "pacing", "grader", "plan", "similarity", "integrity",
            "sandbox", "cgroup", "confine", "codec", "kernel_side", "kernels", "warm", "hub",
            "cli"]

@@ -7,6 +7,8 @@
     python -m annslam_lib errata                   the paper's errata as a Markdown table
     python -m annslam_lib reproduce --out DIR [--fast] [--seeds N]   the paper's figures 5-8 and results table
     python -m annslam_lib release [--out student] [NOTEBOOK ...]   student versions (no solutions)
+    python -m annslam_lib publish --repo R --branch B              the release as a git branch
+    python -m annslam_lib launch --hub URL --repo R --branch B [CH] nbgitpuller links for a hub
     python -m annslam_lib grade SUBMISSION ... [--json FILE]        grade submissions (sandboxed)
     python -m annslam_lib exercises                                the graded exercises per notebook
     python -m annslam_lib pacing                                   estimated student time per chapter
@@ -14,6 +16,7 @@
     python -m annslam_lib running --root DIR                       is a course server open on DIR?
     python -m annslam_lib hub --class FILE [--port P]              a JupyterHub for a class (root)
     python -m annslam_lib class release|collect|grade|feedback CH  the instructor's steps on it
+    python -m annslam_lib class export [CH]                        the gradebook for the LMS
     python -m annslam_lib --version                                the course's version
 
 Each command is a sub-parser added by an ``_add_<command>`` function that sets ``func``;
@@ -237,6 +240,61 @@ def _add_release(sub) -> None:
     p.add_argument("--out", default="student", metavar="DIR",
                    help="output folder (default ./student; never the notebooks' own folder)")
     p.set_defaults(func=_release)
+
+
+def _publish(args: argparse.Namespace) -> int:
+    from .publish import PublishError, publish
+    from .release import ReleaseError
+
+    try:
+        done = publish(args.repo, args.branch, args.notebooks or _course_notebooks(),
+                       message=args.message, course_repo=args.course_repo,
+                       course_ref=args.course_ref)
+    except (PublishError, ReleaseError, ValueError) as e:
+        print(f"publish: {e}", file=sys.stderr)
+        return 2
+    print(f"== {done.summary()}")
+    return 0
+
+
+def _add_publish(sub) -> None:
+    p = sub.add_parser("publish", help="publish the student release as a branch of a git "
+                       "repository (for nbgitpuller, Binder and Colab)")
+    p.add_argument("notebooks", nargs="*", metavar="NOTEBOOK",
+                   help="instructor notebooks (default: every notebook of the course)")
+    p.add_argument("--repo", required=True, help="the release's git repository (a folder, "
+                   "file:// or a remote address you can push to)")
+    p.add_argument("--branch", required=True, help="the branch to publish to, e.g. fall-2027")
+    p.add_argument("--message", help="the commit's message")
+    p.add_argument("--course-repo", help="the course's own repository (https): each chapter "
+                   "Colab can run then starts with the cell that installs the library there")
+    p.add_argument("--course-ref", default="main", help="its branch or tag (default main)")
+    p.set_defaults(func=_publish)
+
+
+def _launch(args: argparse.Namespace) -> int:
+    from .launch import nbgitpuller_link
+
+    names = [c if c.endswith(".ipynb") else f"{c}.ipynb" for c in args.chapters] or [None]
+    try:
+        for name in names:
+            print(nbgitpuller_link(args.hub, args.repo, args.branch, name))
+    except ValueError as e:
+        print(f"launch: {e}", file=sys.stderr)
+        return 2
+    return 0
+
+
+def _add_launch(sub) -> None:
+    p = sub.add_parser("launch", help="print the nbgitpuller link that puts the student "
+                       "release (a chapter, or the whole course) into every student's home "
+                       "on a JupyterHub with nbgitpuller")
+    p.add_argument("chapters", nargs="*", metavar="CHAPTER",
+                   help="chapters to open, e.g. 05_ekf_slam (none: the course's folder)")
+    p.add_argument("--hub", required=True, help="the hub's address, e.g. https://hub.example.edu")
+    p.add_argument("--repo", required=True, help="the published release's repository (https)")
+    p.add_argument("--branch", required=True, help="its branch or tag")
+    p.set_defaults(func=_launch)
 
 
 def _site(args: argparse.Namespace) -> int:
@@ -548,6 +606,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_reproduce(sub)
     _add_compare(sub)
     _add_release(sub)
+    _add_publish(sub)
+    _add_launch(sub)
     _add_site(sub)
     _add_grade(sub)
     _add_exercises(sub)

@@ -16,7 +16,7 @@ import re
 from dataclasses import dataclass
 from urllib.parse import quote, urlencode, urlsplit
 
-__all__ = ["LaunchTargets", "nbgitpuller_link", "binder_link", "colab_link", "links",
+__all__ = ["LaunchTargets", "nbgitpuller_link", "ref_name", "colab_setup", "COLAB_TAG", "binder_link", "colab_link", "links",
            "NOT_ON_COLAB", "PULL_FOLDER", "BINDER_URL"]
 
 #: The folder nbgitpuller clones the release into, in the student's home.
@@ -42,7 +42,9 @@ def _url(value: str, what: str) -> str:
     return value.rstrip("/")
 
 
-def _ref(value: str, what: str) -> str:
+def ref_name(value: str, what: str) -> str:
+    """``value`` if it is a git branch or tag name (letters, digits, ._/-, no ".."), else
+    ValueError naming ``what``."""
     if not _REF.match(value) or ".." in value:
         raise ValueError(f"{what} must be a branch or tag name, got {value!r}")
     return value
@@ -54,9 +56,10 @@ def _chapter(path: str) -> str:
     return path
 
 
-def nbgitpuller_link(hub: str, repo: str, ref: str, notebook: str) -> str:
+def nbgitpuller_link(hub: str, repo: str, ref: str, notebook: str | None) -> str:
     """The link that pulls the release ``repo`` at ``ref`` into the student's home on the
-    JupyterHub at ``hub`` (folder :data:`PULL_FOLDER`) and opens ``notebook`` in JupyterLab.
+    JupyterHub at ``hub`` (folder :data:`PULL_FOLDER`) and opens ``notebook`` in JupyterLab
+    (None: the release's folder, the whole course).
 
     Parameters
     ----------
@@ -66,8 +69,9 @@ def nbgitpuller_link(hub: str, repo: str, ref: str, notebook: str) -> str:
         The student release's git repository (https).
     ref : str
         Its branch or tag.
-    notebook : str
-        The chapter's file name in the release, e.g. ``05_ekf_slam.ipynb``.
+    notebook : str or None
+        The chapter's file name in the release, e.g. ``05_ekf_slam.ipynb``; None for the
+        whole course.
 
     Returns
     -------
@@ -76,8 +80,9 @@ def nbgitpuller_link(hub: str, repo: str, ref: str, notebook: str) -> str:
         (nbgitpuller's parameters).
     """
     hub, repo = _url(hub, "the hub's address"), _url(repo, "the release repository")
-    query = urlencode({"repo": repo, "branch": _ref(ref, "the release's branch"),
-                       "urlpath": f"lab/tree/{PULL_FOLDER}/{_chapter(notebook)}",
+    query = urlencode({"repo": repo, "branch": ref_name(ref, "the release's branch"),
+                       "urlpath": f"lab/tree/{PULL_FOLDER}" + (
+                           f"/{_chapter(notebook)}" if notebook is not None else ""),
                        "targetpath": PULL_FOLDER})
     return f"{hub}/hub/user-redirect/git-pull?{query}"
 
@@ -95,9 +100,9 @@ def binder_link(env_repo: str, env_ref: str, repo: str, ref: str, notebook: str,
         ``{binder}/v2/git/{url}/{env_ref}?urlpath=...`` for any other.
     """
     binder, env_repo = _url(binder, "the BinderHub address"), _url(env_repo, "the course repository")
-    env_ref = _ref(env_ref, "the course repository's branch")
+    env_ref = ref_name(env_ref, "the course repository's branch")
     pull = urlencode({"repo": _url(repo, "the release repository"),
-                      "branch": _ref(ref, "the release's branch"),
+                      "branch": ref_name(ref, "the release's branch"),
                       "urlpath": f"lab/tree/{PULL_FOLDER}/{_chapter(notebook)}",
                       "targetpath": PULL_FOLDER})
     m = _GITHUB.match(env_repo)
@@ -113,7 +118,24 @@ def colab_link(repo: str, ref: str, notebook: str) -> str | None:
     if m is None or _chapter(notebook).removesuffix(".ipynb") in NOT_ON_COLAB:
         return None
     return (f"https://colab.research.google.com/github/{m.group(1)}/{m.group(2)}/blob/"
-            f"{quote(_ref(ref, 'the release branch'))}/{notebook}")
+            f"{quote(ref_name(ref, 'the release branch'))}/{notebook}")
+
+
+#: The tag of the set-up cell :func:`colab_setup` writes.
+COLAB_TAG = "colab-setup"
+
+
+def colab_setup(course_repo: str, course_ref: str) -> str:
+    """The source of the first cell of a chapter published for Colab: on Colab only, it
+    installs the course's library from ``course_repo`` at ``course_ref`` into Colab's own
+    Python (the data are downloaded by the library at first use); anywhere else it does
+    nothing."""
+    repo = _url(course_repo, "the course repository")
+    ref = ref_name(course_ref, "the course's branch or tag")
+    return ("# On Google Colab only: install the course's library (elsewhere it is set up "
+            "already).\nimport sys\n"
+            "if \"google.colab\" in sys.modules:\n"
+            f"    %pip install --quiet \"annslam @ git+{repo}@{ref}\"")
 
 
 @dataclass(frozen=True)
@@ -134,8 +156,8 @@ class LaunchTargets:
         for name in ("release_repo", "hub", "course_repo"):
             if getattr(self, name) is not None:
                 _url(getattr(self, name), name)
-        _ref(self.release_ref, "release_ref")
-        _ref(self.course_ref, "course_ref")
+        ref_name(self.release_ref, "release_ref")
+        ref_name(self.course_ref, "course_ref")
         _url(self.binder, "binder")
 
 
@@ -156,8 +178,8 @@ def links(targets: LaunchTargets, notebook: str) -> list[tuple[str, str | None, 
     stem = notebook.removesuffix(".ipynb")
     colab = colab_link(t.release_repo, t.release_ref, notebook) if t.course_repo else None
     if colab is not None:
-        out.append(("Open in Colab", colab, "in Colab's own Python: run "
-                    f"`%pip install \"annslam @ git+{t.course_repo}@{t.course_ref}\"` first"))
+        out.append(("Open in Colab", colab, "in Colab's own Python: the chapter's first "
+                    "cell installs the course's library there"))
     elif stem in NOT_ON_COLAB:
         out.append(("Colab", None, f"not on Colab: {NOT_ON_COLAB[stem]}"))
     return out
