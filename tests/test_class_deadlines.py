@@ -227,8 +227,40 @@ def test_a_link_planted_between_the_check_and_the_copy_is_not_collected(tmp_path
             (entry / "late.txt").symlink_to("/etc/shadow")
         return why
     monkeypatch.setattr(classroom, "unsafe", check_then_plant)
-    with pytest.raises(hub.HubError, match="symbolic link appeared"):
+    with pytest.raises(hub.HubError, match="cannot be opened as a plain file"):
         classroom.collect(layout, CH)
+    assert not (layout.course / "submitted" / "alice" / CH).exists()
+
+
+@ROOT_ONLY
+@pytest.mark.parametrize("plant", ["pipe", "hard link", "foreign file"])
+def test_what_is_planted_between_the_check_and_the_copy_stops_it_without_waiting(
+        tmp_path, monkeypatch, plant):
+    """A pipe would hang a plain copy (it waits for a writer); a hard link or another
+    account's file would take what is not the student's."""
+    layout = _class_of_three(tmp_path, monkeypatch)
+    real, checks = classroom.unsafe, []
+    (tmp_path / "secret").write_text("root's secret")
+
+    def check_then_plant(entry, student):
+        why = real(entry, student)
+        checks.append(student)
+        if student == "alice" and checks.count("alice") == 2 and not why:
+            target = entry / "zz-planted"
+            if plant == "pipe":
+                os.mkfifo(target)
+            elif plant == "hard link":
+                os.link(entry / f"{CH}.ipynb", target)
+            else:
+                target.write_text("x")                # root's, in alice's folder
+            if plant == "pipe":
+                os.lchown(target, 61001, 61001)
+        return why
+    monkeypatch.setattr(classroom, "unsafe", check_then_plant)
+    t0 = time.monotonic()
+    with pytest.raises(hub.HubError, match="alice"):
+        classroom.collect(layout, CH)
+    assert time.monotonic() - t0 < 10
     assert not (layout.course / "submitted" / "alice" / CH).exists()
 
 

@@ -142,15 +142,38 @@ def _policies(layout: HubLayout) -> dict:
         raise HubError(str(e)) from None
 
 
-def _links(folder: Path) -> list[str]:
-    return [os.path.join(root, n) for root, dirs, files in os.walk(folder)
-            for n in dirs + files if os.path.islink(os.path.join(root, n))]
+def _copy_own(src: Path, dest: Path, uid: int) -> None:
+    """Copy the submission folder ``src`` to ``dest``, taking only what is still plainly the
+    student's (``uid``): each file opened without following a link and without waiting
+    (a pipe planted since the check would hang a plain copy), then checked on the opened
+    file itself (a regular file, one name, the student's); anything else raises HubError."""
+    dest.mkdir(parents=True)
+    with os.scandir(src) as entries:
+        for e in entries:
+            st = e.stat(follow_symlinks=False)
+            if stat.S_ISDIR(st.st_mode) and st.st_uid == uid:
+                _copy_own(Path(e.path), dest / e.name, uid)
+                continue
+            try:
+                fd = os.open(e.path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
+            except OSError as err:
+                raise HubError(f"{e.path}: cannot be opened as a plain file ({err})") from None
+            try:
+                st = os.fstat(fd)
+                if not stat.S_ISREG(st.st_mode) or st.st_nlink != 1 or st.st_uid != uid:
+                    raise HubError(f"{e.path}: changed while it was collected (no longer a "
+                                   "plain file of the student's)")
+                with open(dest / e.name, "wb") as out:
+                    while chunk := os.read(fd, 1 << 20):
+                        out.write(chunk)
+            finally:
+                os.close(fd)
 
 
 def _collect(layout: HubLayout, chapter: str, policy) -> list[str]:
     """Each student's submission that counts under ``policy`` (None: their last), copied
-    into ``course/submitted`` (never following a link: nbgrader's own collect would follow
-    one a student plants between the check and the copy); the choices in
+    into ``course/submitted`` by :func:`_copy_own` (nbgrader's own collect would follow a
+    link a student plants between the check and the copy); the choices in
     ``course/grades/CHAPTER-collected.json``."""
     inbound = layout.exchange / COURSE_ID / "inbound"
     subs = deadlines.inbound(inbound, chapter)
@@ -163,11 +186,11 @@ def _collect(layout: HubLayout, chapter: str, policy) -> list[str]:
             why = unsafe(c.submission.folder, c.student)    # again: it may have changed since
             if why:
                 raise HubError(f"{c.submission.folder.name}: {why}; collect again")
-            shutil.copytree(c.submission.folder, dest, symlinks=True)
-            if _links(dest):                          # planted between the check and the copy
-                shutil.rmtree(dest)
-                raise HubError(f"{c.submission.folder.name}: a symbolic link appeared in it "
-                               "while it was collected; not collected")
+            try:
+                _copy_own(c.submission.folder, dest, c.submission.folder.lstat().st_uid)
+            except HubError:
+                shutil.rmtree(dest, ignore_errors=True)
+                raise
         taken = c.submission.at.isoformat(timespec="seconds") if c.submission else None
         claim = c.submission.claimed if c.submission else None
         if claim and abs((c.submission.at - claim).total_seconds()) > 120:
