@@ -389,3 +389,75 @@ def test_an_nbgitpuller_link_pulls_the_published_release_and_keeps_the_students_
         daemon.terminate()
         daemon.wait(timeout=10)
         shutil.rmtree(served, ignore_errors=True)
+
+
+RUN_ALL = """
+import os, time, nbformat, nbclient
+nb = nbformat.read(os.path.expanduser('~/course/01_kinematics.ipynb'), as_version=4)
+t0 = time.monotonic()
+nbclient.NotebookClient(nb, timeout=300, allow_errors=True).execute()
+print(round(time.monotonic() - t0, 2))
+"""
+
+FORK_BOMB = """
+import os, time
+kids = []
+try:
+    while len(kids) < 5000:
+        pid = os.fork()
+        if pid == 0:
+            time.sleep(30)
+            os._exit(0)
+        kids.append(pid)
+except OSError as e:
+    print("stopped at", len(kids), type(e).__name__)
+for k in kids:
+    os.kill(k, 9)
+for k in kids:
+    os.waitpid(k, 0)
+"""
+
+
+def test_a_runaway_kernel_is_stopped_at_its_limits_and_another_students_run_all_goes_on(class_hub):
+    """Student a's kernel hoards memory past the hub's 1.5 GiB, then forks without end; at
+    the same time student b runs chapter 01 (Run All in a kernel of b's server). The hog's
+    kernel is killed and restarted, the fork bomb stops at the process limit, and b's Run
+    All completes, timed beside the runaway and alone (both printed)."""
+    import threading
+
+    import websocket
+    from annslam_lib.course.hub import limits
+
+    silent = (TimeoutError, websocket.WebSocketTimeoutException)
+
+    h, (a, b, _) = class_hub
+    h.api.start_server(a)
+    h.api.start_server(b)
+    alone = h.api.run(b, RUN_ALL, deadline=300)
+    assert alone.error is None, alone
+    beside = {}
+    runner = threading.Thread(target=lambda: beside.update(r=h.api.run(b, RUN_ALL, 300)))
+    with h.api.kernel(a) as k:
+        before = k.execute("import os; print(os.getpid())").stdout.strip()
+        runner.start()
+        with pytest.raises(silent):                  # no reply: the kernel was killed
+            k.execute("x = b'x' * (3 * 1024**3)", deadline=25)
+        after = None
+        for _ in range(60):                          # the server restarts it
+            try:
+                after = k.execute("import os; print(os.getpid())", deadline=5).stdout.strip()
+                break
+            except silent:
+                continue
+        assert after and after != before
+        bomb = k.execute(FORK_BOMB, deadline=120)
+    runner.join(timeout=300)
+    words = bomb.stdout.split()
+    assert words[:2] == ["stopped", "at"], bomb
+    assert int(words[2]) < limits.DEFAULTS.processes
+    assert beside["r"].error is None, beside["r"]
+    t_alone, t_beside = (float(r.stdout.split()[-1]) for r in (alone, beside["r"]))
+    print(f"runaway kernel: killed past 1.5 GiB and restarted (pid {before} -> {after}); fork "
+          f"bomb stopped at {words[2]} processes ({words[3]}); the other student's Run All of "
+          f"chapter 01: {t_alone:.1f} s alone, {t_beside:.1f} s beside the runaway")
+    assert t_beside < 3 * t_alone + 10
