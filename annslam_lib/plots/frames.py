@@ -24,17 +24,24 @@ FRAMES = 10
 MARKER = "annslam-frames:"
 
 
+def _parts(widget):
+    """``widget`` and every widget inside it, breadth first."""
+    queue = [widget]
+    while queue:
+        w = queue.pop(0)
+        yield w
+        queue.extend(getattr(w, "children", ()) or ())
+
+
 def find_control(widget, description: str):
     """The control of ``widget`` (searched through its children) whose description is
     ``description``; ValueError naming the descriptions there are when none is."""
-    seen, stack = [], [widget]
-    while stack:
-        w = stack.pop(0)
+    seen = []
+    for w in _parts(widget):
         if getattr(w, "description", None) == description and hasattr(w, "value"):
             return w
         if getattr(w, "description", None):
             seen.append(w.description)
-        stack.extend(getattr(w, "children", ()) or ())
     raise ValueError(f"no control {description!r} in the widget (it has {seen})")
 
 
@@ -83,12 +90,9 @@ def _picture(widget, outputs):
             png = data["image/png"]
             alt = (getattr(out, "metadata", {}) or {}).get("image/png", {}).get("alt", "")
             return (base64.b64decode(png) if isinstance(png, str) else png), alt
-    stack = [widget]
-    while stack:
-        w = stack.pop(0)
+    for w in _parts(widget):
         if type(w).__name__ == "Image" and getattr(w, "format", "") == "png" and w.value:
             return bytes(w.value), getattr(w, "alt_text", "") or w.tooltip or ""
-        stack.extend(getattr(w, "children", ()) or ())
     raise ValueError("the widget showed no PNG picture")
 
 

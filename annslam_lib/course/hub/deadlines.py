@@ -156,14 +156,8 @@ def load(path) -> dict[str, Policy]:
 def choose(policy: Policy, submissions) -> list[Choice]:
     """For each student among ``submissions`` (:class:`Submission`), the one that counts and
     its share of points under ``policy`` (module docstring), in the students' order."""
-    by_student: dict[str, list[Submission]] = {}
-    for s in submissions:
-        if s.at.tzinfo is None:
-            raise ValueError(f"submission of {s.student}: its time must carry its zone")
-        by_student.setdefault(s.student, []).append(s)
     out = []
-    for student in sorted(by_student):
-        subs = sorted(by_student[student], key=lambda s: s.at)
+    for student, subs in _by_student(submissions).items():
         due = policy.due_for(student)
         limit = due + policy.grace if policy.late == "grace" else due
         whose = "their extended" if student in policy.extensions else "the"
@@ -192,11 +186,19 @@ def choose(policy: Policy, submissions) -> list[Choice]:
 
 def latest(submissions) -> list[Choice]:
     """Without a due date: each student's last submission, in full."""
-    last: dict[str, list[Submission]] = {}
+    return [Choice(st, subs[-1], 0, 1.0, f"last of {len(subs)}")
+            for st, subs in _by_student(submissions).items()]
+
+
+def _by_student(submissions) -> dict[str, list[Submission]]:
+    """Each student's submissions in time order, students in name order; a time without
+    its zone is refused."""
+    by: dict[str, list[Submission]] = {}
     for s in submissions:
-        last.setdefault(s.student, []).append(s)
-    return [Choice(st, max(subs, key=lambda s: s.at), 0, 1.0, f"last of {len(subs)}")
-            for st, subs in sorted(last.items())]
+        if s.at.tzinfo is None:
+            raise ValueError(f"submission of {s.student}: its time must carry its zone")
+        by.setdefault(s.student, []).append(s)
+    return {st: sorted(by[st], key=lambda s: s.at) for st in sorted(by)}
 
 
 def _claimed(name: str) -> dt.datetime | None:
