@@ -9,8 +9,9 @@
 #   ./course.sh release [...]       write the student versions (no solutions, no hidden tests)
 #   ./course.sh site [--out DIR ...]  build the course's website (instructors; INSTRUCTOR.md)
 #   ./course.sh grade SUB...        grade submitted notebooks (instructors)
-#   ./course.sh hub --class FILE [--port P]   a JupyterHub for a class, as root (INSTRUCTOR.md)
-#   ./course.sh class ACTION CHAPTER          release|collect|grade|feedback on that hub
+#   ./course.sh hub --class FILE [--lti F]   a JupyterHub for a class, as root (INSTRUCTOR.md)
+#   ./course.sh class ACTION CHAPTER          release|collect|grade|feedback on that hub;
+#                                             class add|drop NAME: a student joins or leaves
 #
 # `test` also installs environment-instructor.txt (nbgrader, playwright, ...).
 #

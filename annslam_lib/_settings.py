@@ -29,9 +29,9 @@ __all__ = ["VARIABLES", "Variable", "SetButEmpty", "HUB_SETTINGS", "is_set", "te
            "cache_off", "cache_folder", "class_cache_folder", "data_folder", "data_url",
            "full_feedback", "kernel", "work_folder", "hub_dir", "hub_class", "hub_instructor",
            "hub_port", "hub_password", "hub_instructor_password", "hub_admin_token",
-           "hub_python", "CACHE", "CLASS_CACHE", "DATA", "DATA_URL", "FEEDBACK", "KERNEL",
+           "hub_python", "hub_lti", "CACHE", "CLASS_CACHE", "DATA", "DATA_URL", "FEEDBACK", "KERNEL",
            "LIFELINE", "WORK", "HUB_DIR", "HUB_CLASS", "HUB_INSTRUCTOR", "HUB_PORT",
-           "HUB_PASSWORD", "HUB_INSTRUCTOR_PASSWORD", "HUB_ADMIN_TOKEN", "HUB_PYTHON",
+           "HUB_PASSWORD", "HUB_INSTRUCTOR_PASSWORD", "HUB_ADMIN_TOKEN", "HUB_PYTHON", "HUB_LTI",
            "HUB_TEST_DIR", "VENV", "TORCH_INDEX", "UNAME", "HUB_DIR_DEFAULT",
            "HUB_INSTRUCTOR_DEFAULT", "HUB_PORT_DEFAULT"]
 
@@ -51,6 +51,7 @@ HUB_PASSWORD = "ANNSLAM_HUB_PASSWORD"
 HUB_INSTRUCTOR_PASSWORD = "ANNSLAM_HUB_INSTRUCTOR_PASSWORD"
 HUB_ADMIN_TOKEN = "ANNSLAM_HUB_ADMIN_TOKEN"
 HUB_PYTHON = "ANNSLAM_HUB_PYTHON"
+HUB_LTI = "ANNSLAM_HUB_LTI"
 # read by course.sh, scripts/ and the tests, not by the library
 HUB_TEST_DIR = "ANNSLAM_HUB_TEST_DIR"
 VENV = "ANNSLAM_VENV"
@@ -120,6 +121,9 @@ VARIABLES: dict[str, Variable] = {
     HUB_ADMIN_TOKEN: Variable(
         "optional: an API token with admin rights on users and servers", "none",
         "course.hub.config; set by course.hub.client.launch"),
+    HUB_LTI: Variable(
+        "the LTI 1.3 settings file: students log in from the LMS", "none: the students' "
+        "shared password", "course.hub.config; set by course.hub.setup.start"),
     HUB_PYTHON: Variable(
         "the interpreter of the students' environment on a hub",
         "a Python 3.11 every user can run: /usr/bin/python3.11, /usr/local/bin/python3.11, "
@@ -140,7 +144,7 @@ VARIABLES: dict[str, Variable] = {
 
 #: The variables ``python -m annslam_lib hub`` passes to ``hub/jupyterhub_config.py``.
 HUB_SETTINGS = (HUB_DIR, HUB_CLASS, HUB_INSTRUCTOR, HUB_PORT, HUB_PASSWORD,
-                HUB_INSTRUCTOR_PASSWORD, HUB_ADMIN_TOKEN)
+                HUB_INSTRUCTOR_PASSWORD, HUB_ADMIN_TOKEN, HUB_LTI)
 
 
 class SetButEmpty(ValueError):
@@ -271,6 +275,12 @@ def hub_instructor_password(env: Mapping[str, str] | None = None) -> str:
 def hub_admin_token(env: Mapping[str, str] | None = None) -> str | None:
     """The admin service's API token (``ANNSLAM_HUB_ADMIN_TOKEN``); None when unset or empty."""
     return _get(HUB_ADMIN_TOKEN, env) or None
+
+
+def hub_lti(env: Mapping[str, str] | None = None) -> Path | None:
+    """The LTI settings file (``ANNSLAM_HUB_LTI``); None when unset or empty."""
+    value = _get(HUB_LTI, env)
+    return Path(value) if value else None
 
 
 def hub_python(env: Mapping[str, str] | None = None) -> Path | None:

@@ -9,6 +9,10 @@ c = get_config()  # noqa: F821 (JupyterHub's config loader defines it)
 configure(c)
 
 # Changes of your own go here, between configure() and check_spawner(), which refuses a
-# spawner that gives no per-student isolation (SimpleLocalProcessSpawner).
+# spawner that gives no per-student isolation (SimpleLocalProcessSpawner). For example,
+# idle servers stopped after 30 minutes instead of an hour:
+#   import sys
+#   from annslam_lib.course.hub.config import idle_culler
+#   c.JupyterHub.services[0] = idle_culler(sys.executable, timeout=1800)
 
 check_spawner(c)

@@ -9,10 +9,13 @@ import os
 import shutil
 import subprocess
 import sys
+import time
+from pathlib import Path
 
 import pytest
 from hub_support import prepared_layout
 from browser_support import launch_chromium, why_no_browser
+from git_http import GitServer
 from hub_browser import Student, cell_index, solution_source
 
 from annslam_lib.course.hub import setup as hub_setup
@@ -160,6 +163,66 @@ def test_a_hub_started_twice_says_where_the_running_one_is(class_hub, tmp_path):
     assert out.returncode == 2
     assert f"already running from {h.layout.root} at {h.url}" in out.stderr
     assert json.loads((h.layout.state / "hub.json").read_text())["url"] == h.url
+
+
+def _roster(h, action: str, name: str) -> str:
+    env = dict(os.environ, ANNSLAM_HUB_DIR=str(h.layout.root))
+    out = subprocess.run([sys.executable, "-m", "annslam_lib", "class", action, name],
+                         env=env, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, f"class {action}: {out.stdout[-2000:]}\n{out.stderr[-2000:]}"
+    return out.stdout
+
+
+def _expired(name: str) -> bool:
+    """The account's expiry date (shadow's 8th field) is in the past."""
+    line = subprocess.run(["getent", "shadow", name], capture_output=True, text=True).stdout
+    field = line.split(":")[7] if line.count(":") >= 7 else ""
+    return field.strip() not in ("", "-1") and int(field) * 86400 < time.time()
+
+
+def test_a_student_joins_mid_term_and_leaves_with_their_files_kept(class_hub):
+    """``class add`` lets a new student in on the running hub; ``class drop`` stops their
+    server, refuses their logins, expires their account and keeps their files; ``class
+    add`` again gives them back, files and all."""
+    import pwd
+
+    h, names = class_hub
+    new = names[0][:-1] + "z"
+    pw = h.passwords["ANNSLAM_HUB_PASSWORD"]
+    class_file = Path(json.loads((h.layout.state / "hub.json").read_text())["class"])
+    try:
+        assert h.api.login(new, pw) == 403                         # not in the class yet
+        assert "can log in now" in _roster(h, "add", new)
+        assert h.api.login(new, pw) == 302
+        h.api.start_server(new)
+        status, _ = h.api.request("PUT", f"/user/{new}/api/contents/mine.txt",
+                                  {"type": "file", "format": "text", "content": "my notes"})
+        assert status in (200, 201)
+        home = Path(pwd.getpwnam(new).pw_dir)
+        out = _roster(h, "drop", new)
+        assert f"their files stay in {home}" in out
+        assert h.api.login(new, pw) == 403
+        assert h.api.request("GET", f"/hub/api/users/{new}")[0] == 404
+        assert _expired(new)
+        assert subprocess.run(["pgrep", "-U", str(pwd.getpwnam(new).pw_uid)],
+                              capture_output=True).returncode == 1     # no process left
+        assert (home / "course" / "mine.txt").read_text() == "my notes"
+        assert f"# dropped: {new}" in class_file.read_text().splitlines()
+        # dropping again, or a name never in the class: refused, saying so
+        again = subprocess.run([sys.executable, "-m", "annslam_lib", "class", "drop", new],
+                               env=dict(os.environ, ANNSLAM_HUB_DIR=str(h.layout.root)),
+                               capture_output=True, text=True, timeout=120)
+        assert again.returncode == 2 and "is not in the class" in again.stderr
+        _roster(h, "add", new)
+        assert h.api.login(new, pw) == 302 and not _expired(new)
+        h.api.start_server(new)
+        status, model = h.api.request("GET", f"/user/{new}/api/contents/mine.txt")
+        assert status == 200 and model["content"] == "my notes"
+    finally:
+        h.api.stop_server(new)
+        h.api.request("DELETE", f"/hub/api/users/{new}")
+        class_file.write_text("".join(f"{n}\n" for n in names))
+        remove_accounts([new])
 
 
 CHAPTER = "01_kinematics"
@@ -330,46 +393,43 @@ def _class_chapter(h, action: str, chapter: str) -> None:
     assert out.returncode == 0, f"class {action}: {out.stdout[-3000:]}\n{out.stderr[-3000:]}"
 
 
-def _pull(h, student: str, repo: str, branch: str) -> str:
-    """nbgitpuller's pull, as its link's page starts it (the event stream it reads), in the
-    student's server; the stream's text."""
-    import urllib.parse
-    import urllib.request
+def _publish(repo: Path, chapters) -> None:
+    from annslam_lib.course import publish
 
-    query = urllib.parse.urlencode({"repo": repo, "branch": branch, "targetpath": "annslam"})
-    req = urllib.request.Request(f"{h.url}/user/{student}/git-pull/api?{query}",
-                                 headers={"Authorization": f"token {h.token}"})
-    with urllib.request.urlopen(req, timeout=120) as r:
-        return r.read().decode()
+    publish.publish(str(repo), "fall", chapters)
 
 
 def test_an_nbgitpuller_link_pulls_the_published_release_and_keeps_the_students_edit(class_hub):
-    """The release published to a git repository served on 127.0.0.1 (git daemon); a
-    student's server pulls it as the course's nbgitpuller link makes it, the student edits a
-    chapter, a new release adds one, and a second pull brings it without touching the edit."""
-    import socket
-
+    """The release published to a git repository served on 127.0.0.1; in Chromium, a
+    logged-in student opens the course's nbgitpuller link for chapter 01 and the chapter
+    opens in JupyterLab from their home; the student edits it, a new release adds chapter
+    02, and the same link again brings it without touching the edit."""
     import nbformat
-    from annslam_lib.course import publish
+    from annslam_lib.course.launch import nbgitpuller_link
 
+    why = why_no_browser()
+    if why:
+        pytest.skip(why)
     h, (_, _, c) = class_hub
     served = h.layout.root / "test-release"
     shutil.rmtree(served, ignore_errors=True)
     served.mkdir(mode=0o755)
-    subprocess.run(["git", "init", "--quiet", "--bare", str(served / "release.git")], check=True)
+    repo = served / "release.git"
+    subprocess.run(["git", "init", "--quiet", "--bare", str(repo)], check=True)
     chapters = [ROOT / "notebooks" / f"{n}.ipynb" for n in ("01_kinematics", "02_laser_offset")]
-    publish.publish(str(served / "release.git"), "fall", chapters[:1])
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    daemon = subprocess.Popen(["git", "daemon", "--reuseaddr", "--export-all", "--listen=127.0.0.1",
-                               f"--port={port}", f"--base-path={served}", str(served)],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    _publish(repo, chapters[:1])
+    server = GitServer(served).__enter__()
+    base = server.url
+    pw, browser = launch_chromium()
+    s = Student(browser, h.url, c)
     try:
-        repo = f"git://127.0.0.1:{port}/release.git"
-        h.api.start_server(c)
-        first = _pull(h, c, repo, "fall")
-        assert '"phase": "finished"' in first, first[-800:]
+        link = nbgitpuller_link(h.url, f"{base}/release.git", "fall", "01_kinematics.ipynb")
+        s.log_in(h.passwords["ANNSLAM_HUB_PASSWORD"])
+        s.page.goto(link)
+        s.page.wait_for_url(f"**/user/{c}/lab/tree/annslam/01_kinematics.ipynb", timeout=120_000)
+        s.page.wait_for_selector(".jp-Notebook .jp-Cell", state="attached", timeout=60_000)
+        tabs = s.page.locator("#jp-main-dock-panel .lm-TabBar-tabLabel").all_inner_texts()
+        assert "01_kinematics.ipynb" in tabs, tabs              # the chapter is open
         status, model = h.api.request("GET", f"/user/{c}/api/contents/annslam/01_kinematics.ipynb")
         assert status == 200
         nb = nbformat.from_dict(model["content"])
@@ -377,17 +437,22 @@ def test_an_nbgitpuller_link_pulls_the_published_release_and_keeps_the_students_
         status, _ = h.api.request("PUT", f"/user/{c}/api/contents/annslam/01_kinematics.ipynb",
                                   {"type": "notebook", "format": "json", "content": nb})
         assert status == 200
-        publish.publish(str(served / "release.git"), "fall", chapters)      # adds chapter 02
-        second = _pull(h, c, repo, "fall")
-        assert '"phase": "finished"' in second, second[-800:]
+        _publish(repo, chapters)                                      # adds chapter 02
+        s.page.goto(link)
+        s.page.wait_for_url(f"**/user/{c}/lab/tree/annslam/01_kinematics.ipynb", timeout=120_000)
         status, listing = h.api.request("GET", f"/user/{c}/api/contents/annslam")
         assert sorted(i["name"] for i in listing["content"]) == [
             "01_kinematics.ipynb", "02_laser_offset.ipynb", "README.md"]
         status, model = h.api.request("GET", f"/user/{c}/api/contents/annslam/01_kinematics.ipynb")
         assert model["content"]["cells"][-1]["source"] == "my own note on the axle speed"
+    except Exception:
+        s.shot("nbgitpuller")
+        raise
     finally:
-        daemon.terminate()
-        daemon.wait(timeout=10)
+        s.close()
+        browser.close()
+        pw.stop()
+        server.__exit__()
         shutil.rmtree(served, ignore_errors=True)
 
 
@@ -461,3 +526,47 @@ def test_a_runaway_kernel_is_stopped_at_its_limits_and_another_students_run_all_
           f"bomb stopped at {words[2]} processes ({words[3]}); the other student's Run All of "
           f"chapter 01: {t_alone:.1f} s alone, {t_beside:.1f} s beside the runaway")
     assert t_beside < 3 * t_alone + 10
+
+
+def test_the_idle_culler_stops_a_server_idle_past_its_timeout_and_keeps_a_fresh_one(class_hub):
+    """The hub's idle-culler service, its command as the hub runs it but with a timeout of
+    seconds, against this hub: a server idle for longer is stopped, one started since is
+    kept, and the student stays. The last test of the module: it stops idle servers."""
+    from datetime import datetime, timezone
+
+    from annslam_lib.course.hub.config import idle_culler
+
+    h, (a, b, c) = class_hub
+
+    def server(name):
+        status, user = h.api.request("GET", f"/hub/api/users/{name}")
+        return (user or {}).get("servers", {}).get("") if status == 200 else None
+
+    def idle_for(name):
+        stamp = datetime.fromisoformat(server(name)["last_activity"].replace("Z", "+00:00"))
+        return (datetime.now(timezone.utc) - stamp).total_seconds()
+
+    for name in (a, b, c):                       # fresh servers: no activity of earlier tests
+        h.api.stop_server(name)
+    h.api.start_server(a)
+    time.sleep(10)
+    h.api.start_server(b)
+    ages = {n: idle_for(n) for n in (a, b)}
+    assert ages[a] - ages[b] >= 8, ages
+    timeout = round((ages[a] + ages[b]) / 2)
+    command = idle_culler(sys.executable, timeout=timeout, every=600)["command"]
+    env = dict(os.environ, JUPYTERHUB_API_TOKEN=h.token, JUPYTERHUB_API_URL=f"{h.url}/hub/api")
+    culler = subprocess.Popen(command, env=env, stdout=subprocess.PIPE,
+                              stderr=subprocess.STDOUT, text=True)
+    try:
+        end = time.monotonic() + 30
+        while server(a) and time.monotonic() < end:
+            time.sleep(0.5)
+        assert not server(a), f"the server idle for {ages[a]:.0f} s was not stopped in 30 s"
+        assert server(b)                         # idle for less than the timeout
+    finally:
+        culler.terminate()
+        log = culler.communicate(timeout=20)[0]
+    culled = [line for line in log.splitlines() if "Culling server" in line]
+    assert len(culled) == 1 and a in culled[0], log[-2000:]
+    assert h.api.request("GET", f"/hub/api/users/{a}")[0] == 200      # only the server stopped

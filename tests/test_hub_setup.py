@@ -244,14 +244,36 @@ def test_the_hub_listens_on_loopback_and_lets_in_only_the_class(tmp_path):
     assert c.Spawner.cmd[:4] == [str(tmp_path / "student-env" / "bin" / "python"), "-m",
                                  "annslam_lib", "singleuser"]
     assert str(tmp_path / "state") in c.JupyterHub.db_url
-    assert "services" not in c.JupyterHub
+    assert c.Spawner.env_keep == ["LANG", "LC_ALL"]       # no PYTHONPATH of the hub's
+    # no admin service without its token; the idle culler with its role, always
+    assert [svc["name"] for svc in c.JupyterHub.services] == ["idle-culler"]
+    assert c.JupyterHub.services[0]["command"][1:] == [
+        "-m", "jupyterhub_idle_culler", "--timeout=3600", "--cull-every=300"]
+    assert c.JupyterHub.load_roles == [{"name": "idle-culler", "services": ["idle-culler"],
+                                        "scopes": hub_config.IDLE_SCOPES}]
     hub_config.check_spawner(c)
+
+
+def test_an_lti_settings_file_switches_the_login_to_the_lms(tmp_path):
+    pytest.importorskip("ltiauthenticator", reason="jupyterhub-ltiauthenticator "
+                        "(environment-hub.txt) is not installed")
+    lti = tmp_path / "lti.toml"
+    lti.write_text('issuer = "https://lms.example"\nclient_id = "42"\n'
+                   'deployment_id = "d1"\nauthorize_url = "https://lms.example/auth"\n'
+                   'jwks_url = "https://lms.example/jwks"\ncourse = "c9"\n')
+    c = _configured(tmp_path, ANNSLAM_HUB_LTI=str(lti))
+    assert c.JupyterHub.authenticator_class.__name__ == "CourseLTIAuthenticator"
+    a = c.CourseLTIAuthenticator
+    assert (a.issuer, a.client_id, a.jwks_endpoint, a.username_key) == (
+        "https://lms.example", {"42"}, "https://lms.example/jwks", "email")
+    assert "SharedPasswordAuthenticator" not in c                 # no password login at all
+    assert c.Authenticator.allowed_users == {"alice", "bob"}
 
 
 def test_an_admin_token_becomes_a_service_with_admin_scopes(tmp_path):
     c = _configured(tmp_path, ANNSLAM_HUB_ADMIN_TOKEN="t" * 40)
-    assert c.JupyterHub.services == [{"name": "course-admin", "api_token": "t" * 40}]
-    scopes = c.JupyterHub.load_roles[0]["scopes"]
+    assert c.JupyterHub.services[1] == {"name": "course-admin", "api_token": "t" * 40}
+    scopes = c.JupyterHub.load_roles[1]["scopes"]
     assert {"admin:users", "admin:servers", "access:servers"} <= set(scopes)
 
 
@@ -488,3 +510,29 @@ def test_a_feedback_page_names_its_language_and_its_table_headers():
     assert seen["html"] == [{"lang": "en"}]
     assert [a.get("scope") for a in seen["th"]] == ["col"] * 4
     assert seen["caption"] == 1 and seen["td"] == 8
+
+
+def test_class_add_and_drop_edit_the_class_file_the_hub_started_with(tmp_path):
+    """Without a running hub: the class file changes, each refusal says why."""
+    from annslam_lib.course.hub import roster
+
+    layout = hub.HubLayout(tmp_path)
+    layout.state.mkdir()
+    f = tmp_path / "class.txt"
+    f.write_text("alice\n# a comment\nbob")
+    with pytest.raises(hub.HubError, match="no class file is known"):
+        roster.add(layout, "carol")
+    (layout.state / "hub.json").write_text(json.dumps({"pid": 0, "url": "", "class": str(f)}))
+    assert "can log in once the hub runs" in roster.add(layout, "carol")
+    assert hub.read_class(f) == ["alice", "bob", "carol"]
+    for name, words in [("bob", "already in the class"), ("instructor", "instructor"),
+                        ("Bob!", "not a user name")]:
+        with pytest.raises(hub.HubError, match=words):
+            roster.add(layout, name)
+    assert "they had no account yet" in roster.drop(layout, "bob")
+    assert hub.read_class(f) == ["alice", "carol"]
+    assert "# dropped: bob" in f.read_text().splitlines()
+    with pytest.raises(hub.HubError, match="is not in the class"):
+        roster.drop(layout, "bob")
+    roster.add(layout, "bob")
+    assert hub.read_class(f) == ["alice", "carol", "bob"]

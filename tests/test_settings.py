@@ -187,7 +187,7 @@ def test_the_table_is_whole():
     assert set(_settings.HUB_SETTINGS) <= set(_settings.VARIABLES)
     from annslam_lib.course.hub import config as hub_config
     assert list(hub_config.SETTINGS) == list(_settings.HUB_SETTINGS)
-    assert len(hub_config.SETTINGS) == 7
+    assert len(hub_config.SETTINGS) == 8
 
 
 def test_settings_imports_the_standard_library_only():

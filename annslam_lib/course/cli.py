@@ -17,6 +17,7 @@
     python -m annslam_lib hub --class FILE [--port P]              a JupyterHub for a class (root)
     python -m annslam_lib class release|collect|grade|feedback CH  the instructor's steps on it
     python -m annslam_lib class export [CH]                        the gradebook for the LMS
+    python -m annslam_lib class add|drop NAME                      a student joins or leaves
     python -m annslam_lib --version                                the course's version
 
 Each command is a sub-parser added by an ``_add_<command>`` function that sets ``func``;
@@ -496,7 +497,7 @@ def _hub(args: argparse.Namespace) -> int:
         if args.class_file is None:
             raise HubError("name the class: --class FILE (the students' user names, one a line)")
         start(HubLayout.from_env(), args.class_file, port=args.port, instructor=args.instructor,
-              studies=not args.no_studies)
+              studies=not args.no_studies, lti_file=args.lti)
     except HubError as e:
         print(f"hub: {e}", file=sys.stderr)
         return 2
@@ -511,6 +512,8 @@ def _add_hub(sub) -> None:
     p.add_argument("--port", type=int, default=8000)
     p.add_argument("--instructor", default="instructor", metavar="NAME",
                    help="the instructor's account (default instructor)")
+    p.add_argument("--lti", metavar="FILE", help="students log in from the LMS with LTI 1.3, "
+                   "with the settings of FILE (INSTRUCTOR.md); without it, a shared password")
     p.add_argument("--prepare-only", action="store_true",
                    help="set up the hub folder (students' environment, release, data, class "
                    "studies, proxy) and stop")
@@ -530,6 +533,13 @@ def _class(args: argparse.Namespace) -> int:
 
     try:
         layout = HubLayout.from_env()
+        if args.action in ("add", "drop"):
+            from .hub import roster
+
+            if args.chapter is None:
+                raise HubError(f"name the student: class {args.action} NAME")
+            print(getattr(roster, args.action)(layout, args.chapter, args.instructor))
+            return 0
         if args.chapter is None and args.action != "export":
             raise HubError("name the chapter, e.g. 03_observation")
         try:
@@ -550,10 +560,12 @@ def _class(args: argparse.Namespace) -> int:
 def _add_class(sub) -> None:
     p = sub.add_parser("class", help="the instructor's steps on the class hub (as root): "
                        "release, collect, grade, feedback of one chapter; export the "
-                       "gradebook for the LMS")
-    p.add_argument("action", choices=["release", "collect", "grade", "feedback", "export"])
+                       "gradebook for the LMS; add or drop a student")
+    p.add_argument("action", choices=["release", "collect", "grade", "feedback", "export",
+                                      "add", "drop"])
     p.add_argument("chapter", nargs="?", help="a notebook's name without .ipynb, e.g. "
-                   "03_observation (export: every graded chapter when left out)")
+                   "03_observation (export: every graded chapter when left out); add, "
+                   "drop: the student's user name")
     p.add_argument("--instructor", default="instructor", metavar="NAME",
                    help="the instructor's account, owner of the course folder (default "
                    "instructor)")

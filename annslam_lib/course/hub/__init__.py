@@ -10,6 +10,8 @@ Its modules:
 - ``deadlines``: due dates, late policies and extensions (``course/course.toml``), and which
   submission of each student is collected
 - ``gradebook``: the class's grades as CSV files for Canvas and Moodle
+- ``lti``: students' login from the LMS with LTI 1.3 (``./course.sh hub --lti FILE``)
+- ``roster``: a student added or dropped mid-term (``./course.sh class add|drop NAME``)
 - ``limits``: each student's server within memory, CPU and process limits (a control group
   per student, joined before the server runs)
 - ``client``: a running hub driven over its REST API as an admin service (the hub's tests
@@ -57,7 +59,8 @@ __all__ = ["HubError", "HubLayout", "ENV_DIR", "COURSE_ID", "MARK", "read_class"
            "check_name", "account_status", "ensure_account", "give_course", "running_hub",
            "write_role_config", "server_env", "STUDENT_DISABLED", "INSTRUCTOR_DISABLED",
            "system_python", "reachable_by_others", "open_to_all",
-           "setup", "config", "classroom", "client", "deadlines", "gradebook", "limits"]
+           "setup", "config", "classroom", "client", "deadlines", "gradebook", "limits", "lti",
+           "roster"]
 
 ENV_DIR = _settings.HUB_DIR
 DEFAULT_DIR = _settings.HUB_DIR_DEFAULT
@@ -222,6 +225,10 @@ def write_role_config(layout: HubLayout, role: str) -> Path:
         indent=1) + "\n")
     (folder / "labconfig" / "page_config.json").write_text(json.dumps(
         {"disabledExtensions": {e: True for e in disabled["lab"]}}, indent=1) + "\n")
+    # jupyter_core's one-time migration of an old ~/.ipython configuration writes this
+    # marker into the configuration folder, which students cannot write: a server started
+    # again after a kernel made ~/.ipython would fail there. Written here, it is skipped.
+    (folder / "migrated").write_text("not migrated: the course's role configuration\n")
     for p in [folder, folder / "labconfig", *folder.rglob("*")]:
         os.chmod(p, 0o755 if p.is_dir() else 0o644)
     return folder
@@ -232,14 +239,17 @@ def running_hub(layout: HubLayout) -> str | None:
     info = layout.state / "hub.json"
     try:
         data = json.loads(info.read_text())
-        os.kill(int(data["pid"]), 0)
+        pid = int(data["pid"])
+        if pid <= 0:                       # 0 and -1 would signal a group, not a process
+            return None
+        os.kill(pid, 0)
     except (OSError, ValueError, KeyError, TypeError):
         return None
     try:
         with urllib.request.urlopen(data["url"].rstrip("/") + "/hub/api", timeout=3) as r:
             if r.status == 200:
                 return data["url"]
-    except OSError:
+    except (OSError, ValueError, AttributeError):     # no hub there, or no address
         pass
     return None
 

@@ -6,14 +6,18 @@ the config file holds no secret and a hub restarted by hand reads the same setti
 
 Swapping the parts a university changes:
 
-- **Authenticator.** The built-in ``shared-password`` authenticator suits a supervised lab:
-  one password for the students (``ANNSLAM_HUB_PASSWORD``, at least 8 characters), one for
-  the instructor (``ANNSLAM_HUB_INSTRUCTOR_PASSWORD``, at least 32). It does not tell
-  students apart: anyone with the students' password can log in as any listed student. For
-  graded work use the university's login: set ``c.JupyterHub.authenticator_class`` to
-  ``oauthenticator.GenericOAuthenticator`` (OAuth/OpenID Connect) or ``ltiauthenticator``'s
-  LTI 1.3 authenticator (from an LMS), keeping ``c.Authenticator.allowed_users`` from the
-  class file.
+- **Authenticator.** With an LTI settings file (``ANNSLAM_HUB_LTI``, ``./course.sh hub
+  --lti FILE``), students log in from the LMS with LTI 1.3 (:mod:`.lti`). Without one, the
+  built-in ``shared-password`` authenticator, for a supervised lab only: one password for the
+  students (``ANNSLAM_HUB_PASSWORD``, at least 8 characters), one for the instructor
+  (``ANNSLAM_HUB_INSTRUCTOR_PASSWORD``, at least 32). It does not tell students apart: anyone
+  with the students' password can log in as any listed student, so it is not for graded
+  work. Either way ``c.Authenticator.allowed_users`` is the class file; ``class add`` and
+  ``class drop`` change it on the running hub.
+- **Idle servers** are stopped by ``jupyterhub-idle-culler``, a service of the hub, after
+  :data:`IDLE_TIMEOUT` seconds without activity (a student's files stay; their next visit
+  starts a new server); another timeout in ``hub/jupyterhub_config.py``:
+  ``c.JupyterHub.services[0] = idle_culler(sys.executable, timeout=1800)``.
 - **Spawner.** ``LocalProcessSpawner`` with one Unix account per student is the isolation
   on one machine, its memory and CPU limits enforced by a control group per student
   (:mod:`.limits`; change them with ``c.Spawner.mem_limit``, ``c.Spawner.cpu_limit`` and
@@ -30,14 +34,28 @@ from __future__ import annotations
 from pathlib import Path
 
 from ... import _settings
-from . import HubError, HubLayout, ensure_account, give_course, limits, read_class, server_env
+from . import HubError, HubLayout, ensure_account, give_course, limits, lti, read_class, server_env
 
-__all__ = ["configure", "check_spawner", "pre_spawn", "REFUSED_SPAWNERS", "SETTINGS"]
+__all__ = ["configure", "check_spawner", "pre_spawn", "idle_culler", "REFUSED_SPAWNERS",
+           "SETTINGS", "IDLE_TIMEOUT", "IDLE_EVERY"]
 
 #: The environment variables ``python -m annslam_lib hub`` sets for the config file, with
 #: what each sets (their defaults and readers: ``annslam_lib._settings.VARIABLES``).
 SETTINGS = {name: _settings.VARIABLES[name].sets for name in _settings.HUB_SETTINGS}
 REFUSED_SPAWNERS = {"simple", "jupyterhub.spawner.SimpleLocalProcessSpawner"}
+#: A server without activity for this long (seconds) is stopped; checked every IDLE_EVERY.
+IDLE_TIMEOUT = 3600
+IDLE_EVERY = 300
+#: The scopes jupyterhub-idle-culler needs (its documentation's list).
+IDLE_SCOPES = ["list:users", "read:users:activity", "read:servers", "delete:servers"]
+
+
+def idle_culler(python: str, timeout: int = IDLE_TIMEOUT, every: int = IDLE_EVERY) -> dict:
+    """The hub service that stops servers idle for ``timeout`` seconds (checked every
+    ``every`` seconds) and its role."""
+    return {"name": "idle-culler",
+            "command": [python, "-m", "jupyterhub_idle_culler", f"--timeout={int(timeout)}",
+                        f"--cull-every={int(every)}"]}
 
 
 def _role(spawner) -> str:
@@ -79,9 +97,13 @@ def configure(c, env=None) -> None:
     c.JupyterHub.db_url = f"sqlite:///{layout.state / 'jupyterhub.sqlite'}"
     c.JupyterHub.cookie_secret_file = str(layout.state / "jupyterhub_cookie_secret")
 
-    c.JupyterHub.authenticator_class = "shared-password"
-    c.SharedPasswordAuthenticator.user_password = _settings.hub_password(env)
-    c.SharedPasswordAuthenticator.admin_password = _settings.hub_instructor_password(env)
+    lti_file = _settings.hub_lti(env)
+    if lti_file is not None:
+        lti.configure(c, lti_file)
+    else:
+        c.JupyterHub.authenticator_class = "shared-password"
+        c.SharedPasswordAuthenticator.user_password = _settings.hub_password(env)
+        c.SharedPasswordAuthenticator.admin_password = _settings.hub_instructor_password(env)
     c.Authenticator.allowed_users = set(students)
     c.Authenticator.admin_users = {instructor}
 
@@ -91,19 +113,27 @@ def configure(c, env=None) -> None:
     c.Spawner.cpu_limit = limits.DEFAULTS.cpus
     c.Spawner.cmd = [str(layout.env / "bin" / "python"), "-m", "annslam_lib", "singleuser",
                      "--release", str(layout.release), "--"]
+    # nothing of the hub's own environment (PYTHONPATH, VIRTUAL_ENV, ...) reaches a server:
+    # its environment is server_env's
+    c.Spawner.env_keep = ["LANG", "LC_ALL"]
     c.Spawner.default_url = "/lab"
     c.Spawner.pre_spawn_hook = pre_spawn
     # A class on one machine starts servers slowly (about 4 s of imports each, CPU-bound).
     c.Spawner.start_timeout = 120
     c.Spawner.http_timeout = 120
 
+    import sys
+
+    c.JupyterHub.services = [idle_culler(sys.executable)]
+    c.JupyterHub.load_roles = [{"name": "idle-culler", "services": ["idle-culler"],
+                                "scopes": IDLE_SCOPES}]
     token = _settings.hub_admin_token(env)
-    if token:
-        c.JupyterHub.services = [{"name": "course-admin", "api_token": token}]
-        c.JupyterHub.load_roles = [{
+    if token:       # the instructor's commands (class add, class drop) and the tests
+        c.JupyterHub.services.append({"name": "course-admin", "api_token": token})
+        c.JupyterHub.load_roles.append({
             "name": "course-admin", "services": ["course-admin"],
             "scopes": ["admin:users", "admin:servers", "access:servers", "list:users",
-                       "read:users", "tokens"]}]
+                       "read:users", "tokens", "read:services"]})
 
 
 def check_spawner(c) -> None:

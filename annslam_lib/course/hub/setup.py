@@ -23,7 +23,7 @@ from ... import _settings
 from . import (HubError, HubLayout, open_to_all, reachable_by_others, read_class, running_hub,
                server_env, system_python, write_role_config)
 
-__all__ = ["ROOT", "PREPARED", "prepare", "start", "check_private", "copy_data", "install_proxy",
+__all__ = ["ROOT", "PREPARED", "prepare", "start", "admin_token", "check_private", "copy_data", "install_proxy",
            "passwords", "warm_class_studies"]
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -248,20 +248,49 @@ def prepare(layout: HubLayout, class_file=None, instructor: str = "instructor", 
     return students
 
 
+def admin_token(layout: HubLayout, env) -> str:
+    """The API token of the instructor's commands (``class add``, ``class drop``):
+    ``ANNSLAM_HUB_ADMIN_TOKEN`` when given, else made once; kept in ``state/admin-token``
+    (root's only)."""
+    kept = layout.state / "admin-token"
+    token = _settings.hub_admin_token(env)
+    if token is None:
+        token = kept.read_text().strip() if kept.exists() else secrets.token_hex(32)
+    fd = os.open(kept, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW, 0o600)
+    with os.fdopen(fd, "w") as f:
+        f.write(token + "\n")
+    return token
+
+
 def start(layout: HubLayout, class_file, *, port: int = 8000,
-          instructor: str = "instructor", env=None, studies: bool = True) -> None:
-    """Prepare, then replace this process by JupyterHub (``hub.json`` names it)."""
+          instructor: str = "instructor", env=None, studies: bool = True,
+          lti_file=None) -> None:
+    """Prepare, then replace this process by JupyterHub (``hub.json`` names it). With
+    ``lti_file`` (:mod:`.lti`) students log in from the LMS; without, with the shared
+    password."""
     env = dict(os.environ if env is None else env)
     check_private()
     check_grading()
     check_limits()
+    if lti_file is not None:
+        from .lti import read_settings
+
+        read_settings(lti_file)                  # refused before anything is prepared
     students = prepare(layout, class_file, instructor, studies=studies)
-    env.update(passwords(layout, env))
+    if lti_file is None:
+        env.update(passwords(layout, env))
+        say("login: the students' shared password. It does not tell students apart: "
+            "for a supervised lab, not for graded work (INSTRUCTOR.md: LTI)")
+    else:
+        env[_settings.HUB_LTI] = str(Path(lti_file).resolve())
     env.update({_settings.HUB_DIR: str(layout.root),
                 _settings.HUB_CLASS: str(Path(class_file).resolve()),
-                _settings.HUB_INSTRUCTOR: instructor, _settings.HUB_PORT: str(port)})
+                _settings.HUB_INSTRUCTOR: instructor, _settings.HUB_PORT: str(port),
+                _settings.HUB_ADMIN_TOKEN: admin_token(layout, env)})
     url = f"http://127.0.0.1:{port}"
-    (layout.state / "hub.json").write_text(json.dumps({"pid": os.getpid(), "url": url}) + "\n")
+    (layout.state / "hub.json").write_text(json.dumps(
+        {"pid": os.getpid(), "url": url, "class": str(Path(class_file).resolve()),
+         "instructor": instructor}) + "\n")
     say(f"JupyterHub for {len(students)} students and {instructor!r} at {url}")
     exe = Path(sys.executable).parent / "jupyterhub"
     os.chdir(layout.state)
