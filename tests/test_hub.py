@@ -142,6 +142,8 @@ def test_only_listed_students_log_in_with_the_students_password(class_hub):
     assert h.api.login("instructor", pw) == 403                 # the admin needs the admin's
     status, _ = h.api.request("GET", "/hub/api/users/mallory")
     assert status == 404                                    # no account was made for her
+    # the hub said at its start that a shared password is not for graded work
+    assert "not for graded work" in h.log.read_text()
 
 
 def test_formgrader_is_not_served_to_students(class_hub):

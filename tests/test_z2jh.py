@@ -178,3 +178,10 @@ def test_an_image_holds_the_student_versions_and_both_roles_configurations(tmp_p
     instructor = (layout.role_config("instructor") / "nbgrader_config.py").read_text()
     assert f"c.CourseDirectory.root = {str(layout.course)!r}" in instructor
     assert all(p.stat().st_mode & 0o004 for p in layout.root.rglob("*"))
+
+
+def test_idle_servers_are_culled_after_the_same_hour_as_on_a_local_hub(values):
+    from annslam_lib.course.hub.config import IDLE_EVERY, IDLE_TIMEOUT
+
+    assert values["cull"]["enabled"] is True
+    assert (values["cull"]["timeout"], values["cull"]["every"]) == (IDLE_TIMEOUT, IDLE_EVERY)

@@ -12,6 +12,9 @@
 - ``threads``: single-threaded BLAS while a run goes
 - ``kalman``: the Kalman filter in general form (1-D, linear n-D, the gate, the Bayes grid)
 - ``localisation``: EKF localisation on a known map (one beacon update, the NIS verdict)
+- ``unscented``: the unscented transform and a UKF of the car (sigma points, no Jacobians)
+- ``particles``: a particle filter on a known map (Monte-Carlo localisation: move, weigh,
+  systematic resampling, depletion said)
 """
 from __future__ import annotations
 
@@ -19,6 +22,6 @@ from .._lazy import attach
 
 __getattr__, __dir__, __all__ = attach(
     __name__, ["config", "base", "efficient", "dense", "runner", "stretches", "compiled", "results",
-               "dead_reckoning", "threads", "kalman", "localisation"],
+               "dead_reckoning", "threads", "kalman", "localisation", "unscented", "particles"],
     {"run": "runner", "SlamConfig": "config", "SlamResult": "results", "EkfSlam": "efficient",
      "DenseEkfSlam": "dense"})

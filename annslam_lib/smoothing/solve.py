@@ -86,10 +86,13 @@ def _gps_factor(gtsam, key: int, xy, noise):
 class _Factors:
     """The problem's GTSAM factors, made on demand per pose (iSAM2) or all at once."""
 
-    def __init__(self, gtsam, problem: GraphProblem) -> None:
+    def __init__(self, gtsam, problem: GraphProblem, huber_k: float | None = None) -> None:
         self.g, self.p = gtsam, problem
         nm = gtsam.noiseModel
         self.br_noise = nm.Diagonal.Sigmas(np.array([problem.sigma_bearing, problem.sigma_range]))
+        if huber_k is not None:          # the detections under Huber's loss (robust kernel)
+            self.br_noise = nm.Robust.Create(nm.mEstimator.Huber.Create(float(huber_k)),
+                                             self.br_noise)
         self.gps_noise = nm.Isotropic.Sigma(2, problem.sigma_gps)
         order = np.argsort(problem.obs_node, kind="stable")
         self.obs = order
@@ -125,16 +128,18 @@ class _Factors:
         return self.obs[self.obs_off[k]:self.obs_off[k + 1]]
 
 
-def build_graph(problem: GraphProblem, poses=None, landmarks=None):
+def build_graph(problem: GraphProblem, poses=None, landmarks=None, *,
+                huber_k: float | None = None):
     """(gtsam.NonlinearFactorGraph, gtsam.Values) of the whole problem; values from
     ``poses`` (K, 3) and ``landmarks`` (L, 2), by default the problem's initial ones (the
-    EKF's). Checks the problem first (:func:`~annslam_lib.smoothing.problem.check_problem`)."""
+    EKF's); ``huber_k``: the detections' noise wrapped in Huber's robust loss with that
+    threshold. Checks the problem first (:func:`~annslam_lib.smoothing.problem.check_problem`)."""
     check_problem(problem)
     g = _gtsam()
     poses = problem.initial_poses if poses is None else _checks.array("poses", poses, (problem.n_poses, 3))
     landmarks = (problem.initial_landmarks if landmarks is None
                  else _checks.array("landmarks", landmarks, (problem.n_landmarks, 2)))
-    fac = _Factors(g, problem)
+    fac = _Factors(g, problem, huber_k)
     graph = g.NonlinearFactorGraph()
     prior = fac.prior()
     if prior is not None:
@@ -202,15 +207,17 @@ def _indeterminate(e: Exception, what: str) -> SolverError:
 
 
 def solve_batch(problem: GraphProblem, poses=None, landmarks=None, *,
-                max_iterations: int = 100, relative_tol: float = 1e-6) -> SmoothingResult:
+                max_iterations: int = 100, relative_tol: float = 1e-6,
+                huber_k: float | None = None) -> SmoothingResult:
     """Levenberg-Marquardt over the whole graph from ``poses`` / ``landmarks`` (default:
-    the problem's initial, the EKF's estimate; pass an iSAM2 solution to polish it).
+    the problem's initial, the EKF's estimate; pass an iSAM2 solution to polish it);
+    ``huber_k``: the detections under Huber's loss (:func:`build_graph`).
     Raises :class:`SolverError` if GTSAM finds the system indeterminate, or if LM stops at
     ``max_iterations`` with the error still falling by more than ``relative_tol``."""
     g = _gtsam()
     max_iterations = _checks.integer("max_iterations", max_iterations, lo=1)
     c0 = time.process_time()
-    graph, values = build_graph(problem, poses, landmarks)
+    graph, values = build_graph(problem, poses, landmarks, huber_k=huber_k)
     params = g.LevenbergMarquardtParams()
     params.setMaxIterations(max_iterations)
     params.setRelativeErrorTol(relative_tol)

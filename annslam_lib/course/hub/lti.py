@@ -15,7 +15,9 @@ adds what the course needs before anyone is let in:
 - the hub user name is the one the roster gives: the value of the claim ``username_claim``
   (e.g. ``email`` or ``sub``) matched against the columns ``username``, ``lms_id``,
   ``sis_id`` and ``email`` of ``course/roster.csv``, else the value itself when it is a
-  valid user name; the class file decides who may log in, as with passwords;
+  valid user name; the class file decides who may log in, as with passwords. The claim
+  must be one students cannot edit (a managed e-mail, ``sub``, an LMS login id; never a
+  display name): whoever it names is let in as that student;
 - the instructor's account needs the LMS's Instructor role in the token.
 
 The settings file (TOML, :func:`read_settings`) holds what the LMS administrator gives when
