@@ -15,6 +15,8 @@
 - ``unscented``: the unscented transform and a UKF of the car (sigma points, no Jacobians)
 - ``particles``: a particle filter on a known map (Monte-Carlo localisation: move, weigh,
   systematic resampling, depletion said)
+- ``fastslam``: FastSLAM 1.0, one small EKF per landmark in each particle, and its
+  importance weights
 """
 from __future__ import annotations
 
@@ -22,6 +24,7 @@ from .._lazy import attach
 
 __getattr__, __dir__, __all__ = attach(
     __name__, ["config", "base", "efficient", "dense", "runner", "stretches", "compiled", "results",
-               "dead_reckoning", "threads", "kalman", "localisation", "unscented", "particles"],
+               "dead_reckoning", "threads", "kalman", "localisation", "unscented", "particles",
+               "fastslam"],
     {"run": "runner", "SlamConfig": "config", "SlamResult": "results", "EkfSlam": "efficient",
      "DenseEkfSlam": "dense"})

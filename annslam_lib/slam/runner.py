@@ -245,9 +245,10 @@ def run(dataset, config: SlamConfig | None = None, *, progress=None,
         ``SlamConfig()``.
     progress : bool or None, optional
         A tqdm bar; None = only for long runs with a terminal.
-    backend : {'efficient', 'dense'}, optional
-        'efficient' (:class:`EkfSlam`) or 'dense' (the textbook reference
-        ``slam.dense.DenseEkfSlam``; slow, for checks).
+    backend : {'efficient', 'dense', 'ukf'}, optional
+        'efficient' (:class:`EkfSlam`), 'dense' (the textbook reference
+        ``slam.dense.DenseEkfSlam``; slow, for checks) or 'ukf' (the same state filtered
+        by the unscented transform, ``slam.unscented.ukf_backend``; slow).
     landmark_model : object, optional
         With ``config.landmark_model = 'ann'``, the trained model (``ann.TrainedModel``,
         ``ann.InverseModel`` or anything with ``pseudo_measurement(pose, z, intensity,
@@ -542,6 +543,9 @@ def _build(prep: Prepared, backend: str, gating: str, inspect):
     cfg, ds = prep.config, prep.dataset
     if backend == "efficient":
         from .efficient import EkfSlam as make
+    elif backend == "ukf":
+        from .unscented import ukf_backend
+        make = ukf_backend()
     else:
         from .dense import DenseEkfSlam as make
     if cfg.association == "jcbb" and backend != "efficient":
@@ -573,8 +577,8 @@ def _build(prep: Prepared, backend: str, gating: str, inspect):
 def _run(dataset, config, progress, backend, landmark_model=None, inspect=None,
          gating="auto") -> SlamResult:
     t_start = time.perf_counter()
-    if backend not in ("efficient", "dense"):
-        raise ValueError(f"backend must be 'efficient' or 'dense', got {backend!r}")
+    if backend not in ("efficient", "dense", "ukf"):
+        raise ValueError(f"backend must be 'efficient', 'dense' or 'ukf', got {backend!r}")
     prep = prepare(dataset, config)
     filt, book = _build(prep, backend, gating, inspect)
     cfg, ds, det = prep.config, prep.dataset, prep.detections

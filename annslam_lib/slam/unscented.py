@@ -37,7 +37,7 @@ from ..models.observation import observe
 from ..models.vehicle import Vehicle
 
 __all__ = ["SigmaPoints", "sigma_points", "unscented_transform", "ukf_predict", "ukf_update",
-           "UnscentedError"]
+           "ukf_backend", "UnscentedError"]
 
 
 class UnscentedError(ValueError):
@@ -59,13 +59,18 @@ def _exact(name: str, value, shape: tuple) -> np.ndarray:
 
 
 def _chol(P, what: str) -> np.ndarray:
+    """A square root S of P (S S^T = P): Cholesky's; for a positive SEMI-definite P (a
+    state component known exactly, a control with no noise) the symmetric root of its
+    eigen-decomposition, eigenvalues down to -1e-12 of the largest taken as 0."""
     P = 0.5 * (P + P.T)
     try:
         return np.linalg.cholesky(P)
     except np.linalg.LinAlgError:
-        w = np.linalg.eigvalsh(P)
-        raise UnscentedError(f"{what} is not positive definite (smallest eigenvalue "
-                             f"{w[0]:.3g}): no sigma points can be drawn from it") from None
+        w, V = np.linalg.eigh(P)
+        if w[0] < -1e-12 * max(abs(w[-1]), 1e-300):
+            raise UnscentedError(f"{what} is not positive semi-definite (smallest eigenvalue "
+                                 f"{w[0]:.3g}): no sigma points can be drawn from it") from None
+        return V * np.sqrt(np.clip(w, 0.0, None))
 
 
 def sigma_points(mean, cov, *, alpha: float = 1.0, beta: float = 2.0,
@@ -204,3 +209,105 @@ def ukf_update(pose, P, z, landmark, R, **weights):
         raise UnscentedError(f"the updated covariance lost its definiteness (smallest "
                              f"eigenvalue {w[0]:.3g}) at the sighting z = {z.tolist()}")
     return new, Pn, {"nu": nu, "S": S, "K": K, "zhat": zhat}
+
+
+def _pose_after(X, u_noise, controls, dt: float, vehicle: Vehicle, midpoint: bool):
+    """The laser poses (M, 3) of sigma points X (M, 3) after ``dt`` with their controls
+    (v, alpha) + noise: the course's Euler step (``models.motion.predict``), its rate at
+    the mid-step heading for the 'midpoint' model."""
+    u = np.broadcast_to(controls + u_noise, (X.shape[0], 2))
+    at = X.copy()
+    if midpoint:
+        at[:, 2] += 0.5 * dt * u[:, 0] * np.tan(u[:, 1]) / vehicle.L
+    nxt = predict(at, u, dt, vehicle)[0]
+    out = X + (nxt - at)
+    out[:, 2] = wrap_angle(X[:, 2] + dt * u[:, 0] * np.tan(u[:, 1]) / vehicle.L)
+    return out
+
+
+def ukf_backend():
+    """:class:`UkfSlam`, made on first use (the dense backend it extends imports the
+    perception layer's association code)."""
+    from .dense import DenseEkfSlam
+
+    class UkfSlam(DenseEkfSlam):
+        """EKF-SLAM's state (laser pose, landmarks) filtered by the unscented transform:
+        predictions and updates through sigma points of the whole state (no Jacobian of the
+        models; the control noise added as the EKF adds it), the GPS update (linear) and a
+        new landmark's initialisation as the dense EKF's. The run loop's ``backend='ukf'``
+        (``slam.runner.run``)."""
+
+        weights = {"alpha": 1.0, "beta": 2.0, "kappa": 0.0}
+
+        def predict(self, u, dt: float) -> None:
+            """The state's sigma points through the motion model; the control noise added
+            as the EKF adds it, (Delta / dt) G Q_c G^T with G = d pose / d control at the
+            mean (a rate noise: the same total over an interval however the scans cut it;
+            as control noise on the points, Q_c Delta / dt would grow without bound for a
+            short step)."""
+            from .base import check_dt
+
+            if check_dt(dt) == 0.0:
+                return
+            v, alpha, _, w, _, q00, q01, q11, span = u
+            control = np.array([v, alpha])
+            sp = sigma_points(self.x, self.P, **self.weights)
+
+            def move(X):
+                out = X.copy()
+                out[:, :3] = _pose_after(X[:, :3], 0.0, control, dt, self.vehicle, self._mid)
+                return out
+
+            m, C, _, _ = unscented_transform(sp, move, angles=(2,))
+            at = self.x[:3].copy()
+            if self._mid:
+                at[2] += 0.5 * dt * w
+            G = predict(at, control, dt, self.vehicle)[2]
+            Q = np.array([[q00, q01], [q01, q11]]) * (span / dt)
+            C[:3, :3] += G @ Q @ G.T
+            self.x, self.P = m, C
+
+        def _measure(self, lm, R_diag):
+            sp = sigma_points(self.x, self.P, **self.weights)
+            lm = np.asarray(lm, dtype=np.int64)
+
+            def sight(X):
+                L = X[:, 3:].reshape(X.shape[0], -1, 2)[:, lm]          # (M, m, 2)
+                z = observe(np.repeat(X[:, None, :3], lm.size, 1), L)[0]
+                return z.reshape(X.shape[0], -1)
+
+            R = np.diag(np.tile(R_diag, lm.size))
+            zhat, S, _, Dz = unscented_transform(sp, sight, noise=R,
+                                                 angles=tuple(range(1, 2 * lm.size, 2)))
+            Dx = _deviations(sp.points, self.x, (2,))
+            Pxz = (Dx * sp.wc[:, None]).T @ Dz
+            return zhat, S, Pxz
+
+        def observation_model(self, sigma_range: float, sigma_bearing: float):
+            N = self.n_landmarks
+            zhat, S = np.empty((N, 2)), np.empty((N, 2, 2))
+            for j in range(N):
+                zj, Sj, _ = self._measure([j], [sigma_range**2, sigma_bearing**2])
+                zhat[j], S[j] = zj, Sj
+            return zhat, S
+
+        def update(self, z, lm, sigma_range: float, sigma_bearing: float):
+            from .base import check_sigmas, check_z
+
+            check_sigmas("update", sigma_range, sigma_bearing)
+            z = check_z("update", z)
+            lm = np.asarray(lm, dtype=np.int64).ravel()
+            if lm.size == 0:
+                return 0.0, 0
+            zhat, S, Pxz = self._measure(lm, [sigma_range**2, sigma_bearing**2])
+            nu = z.ravel() - zhat
+            nu[1::2] = wrap_angle(nu[1::2])
+            Si = np.linalg.inv(S)
+            K = Pxz @ Si
+            self.x = self.x + K @ nu
+            self.x[2] = float(wrap_angle(self.x[2]))
+            P = self.P - K @ S @ K.T
+            self.P = 0.5 * (P + P.T)
+            return float(nu @ Si @ nu), 2 * lm.size
+
+    return UkfSlam
