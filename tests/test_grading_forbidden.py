@@ -16,13 +16,14 @@ from annslam_lib.grading import kinematics as gkin
 from annslam_lib.grading import localisation as gloc
 from annslam_lib.grading import metrics as gm
 from annslam_lib.grading import observation as gobs
+from annslam_lib.grading import graph_slam as ggs
 from annslam_lib.grading import smoothing as gsm
 from annslam_lib.grading import verdict as gv
 from annslam_lib.models import geometry, motion, observation
 from annslam_lib.models.vehicle import Vehicle
 from annslam_lib.perception import association
 from annslam_lib.slam import dense, kalman, localisation
-from annslam_lib.smoothing import factors
+from annslam_lib.smoothing import factors, gauss_newton
 
 from solutions import solution
 
@@ -83,6 +84,13 @@ CASES = [
      lambda p, m, z: factors.bearing_range_error(p, m, z), "smoothing.factors.bearing_range_error"),
     (gsm.check_tangent_to_world, "10", "my_tangent_to_world",
      lambda S, phi: factors.tangent_to_world(S, phi), "smoothing.factors.tangent_to_world"),
+    (ggs.check_whitened_range_bearing, "11", "my_whitened_range_bearing",
+     lambda p, m, z, sr, sb: ggs.whitened_range_bearing(p, m, z, sr, sb),
+     "grading.graph_slam.whitened_range_bearing"),
+    (ggs.check_gauss_newton_step, "11", "my_gauss_newton_step",
+     lambda J, e: gauss_newton.step(J, e), "smoothing.gauss_newton.step"),
+    (ggs.check_huber_weights, "11", "my_huber_weights",
+     lambda r, k: gauss_newton.huber(r, k)[1], "smoothing.gauss_newton.huber"),
 ]
 
 

@@ -115,6 +115,10 @@ QUANTITY: dict[str, tuple[str, ...]] = {
     "ex09-loop": IMPLEMENT,
     # 10 beyond the EKF
     "ex10-between-error": IMPLEMENT,        # (10.4) is given
+    # 11 graph-SLAM from scratch: (11.3), (11.4) and (11.6) are given; the code is the exercise
+    "ex11-whitened-range-bearing": IMPLEMENT,
+    "ex11-gauss-newton-step": IMPLEMENT,
+    "ex11-huber-weights": IMPLEMENT,
     "ex10-bearing-range-error": (r"\\mathrm\{wrap\}\(\\hat\\beta-\\beta\)", r"\(10\.5\)",
                                  r"zhat\[1\]-z\[1\]"),
     "ex10-tangent-to-world": (r"\\mathrm\{blockdiag\}\(R\(\\phi", r"B\\Sigma_\{\\text\{tangent\}\}B\^T",

@@ -25,6 +25,8 @@ test can move a slider and check what a student would see.
 - ``ch09_capstone``: the capstone, in which a student's own EKF-SLAM runs
 - ``ch10_beyond_ekf``: why the filter claims too much, first-estimates Jacobians, JCBB, the
   runs as factor graphs
+- ``ch11_graph_slam``: graph-SLAM from scratch on the Car Park, against GTSAM; the
+  information matrix's sparsity, the gauge, wrong associations and a robust loss
 - ``harness``: the harness a student's own filter runs in (chapters 04a and 09): a run as
   steps, the loop's track, its score against the truth
 """
@@ -32,4 +34,4 @@ test can move a slider and check what a student would see.
 __all__ = ["ch00_course_map", "ch01_kinematics", "ch01a_kalman_filter", "ch02_laser_offset",
            "ch03_observation", "ch04_landmarks", "ch04a_localisation", "ch05_ekf_slam",
            "ch05a_diagnose", "ch06_victoria_park", "ch07_ann_training", "ch08_verdict",
-           "ch09_capstone", "ch10_beyond_ekf", "harness"]
+           "ch09_capstone", "ch10_beyond_ekf", "ch11_graph_slam", "harness"]

@@ -12,7 +12,9 @@ with ``allow_pickle=False``); torch tensors; torch ``nn.Sequential`` stacks of L
 ReLU, Sigmoid and Identity layers (their structure and weights) and the SGD and Adam
 optimizers over one module's parameters (their hyper-parameters), which is what the
 chapter 07 training-loop exercise passes; the course's :class:`~annslam_lib.models.vehicle.
-Vehicle` (its four lengths: the capstone's probes pass one); exceptions (class names along
+Vehicle` (its four lengths: the capstone's probes pass one); SciPy sparse matrices, sent in
+compressed-row form (their data, indices, row pointers and shape; checked in full when
+rebuilt: chapter 11's Gauss-Newton step is passed one); exceptions (class names along
 the MRO, module, message). Sizes are bounded (:data:`MAX_BYTES`).
 """
 from __future__ import annotations
@@ -176,6 +178,28 @@ def build_optimizer(spec: dict, modules: list):
     return getattr(torch.optim, kind)(modules[int(spec["module"])].parameters(), **kwargs)
 
 
+def _csr(tree: dict):
+    """A compressed-row sparse matrix from its parts, every index checked against the shape
+    (``check_format(full_check=True)``) before it is used."""
+    import scipy.sparse as sp
+
+    shape = tree.get("shape")
+    if not (isinstance(shape, list) and len(shape) == 2 and all(
+            isinstance(n, int) and not isinstance(n, bool) and 0 <= n < 2**31 for n in shape)):
+        raise CodecError("malformed sparse matrix shape")
+    data, indices, indptr = (decode(tree.get(k)) for k in ("data", "indices", "indptr"))
+    if not all(isinstance(a, np.ndarray) and a.ndim == 1 for a in (data, indices, indptr)) or \
+            indices.dtype.kind not in "iu" or indptr.dtype.kind not in "iu" or \
+            data.dtype.kind not in "biufc":
+        raise CodecError("malformed sparse matrix")
+    try:
+        m = sp.csr_matrix((data, indices, indptr), shape=tuple(shape))
+        m.check_format(full_check=True)
+    except (ValueError, TypeError, IndexError) as e:
+        raise CodecError(f"malformed sparse matrix: {e}") from None
+    return m
+
+
 def encode(value, _modules: list | None = None):
     """A JSON-ready tree for ``value`` (see the module docstring); :class:`Opaque` for
     anything else. ``_modules`` collects torch modules so an optimizer can refer to one."""
@@ -208,6 +232,13 @@ def encode(value, _modules: list | None = None):
     if type(value).__name__ == "Vehicle" and type(value).__module__ == "annslam_lib.models.vehicle":
         return {"t": "vehicle", "v": {k: float(getattr(value, k)) for k in ("L", "H", "a", "b")}}
     mod = type(value).__module__.split(".")[0]
+    if mod == "scipy":
+        import scipy.sparse as sp
+
+        if sp.issparse(value):
+            m = sp.csr_matrix(value)
+            return {"t": "csr", "data": _array(m.data), "indices": _array(m.indices),
+                    "indptr": _array(m.indptr), "shape": [int(n) for n in m.shape]}
     if mod == "torch":
         torch = _torch()
         if isinstance(value, torch.Tensor):
@@ -265,6 +296,8 @@ def decode(tree, _modules: list | None = None):
             return Vehicle(**{k: float(x) for k, x in v.items()})
         except (TypeError, ValueError) as e:
             raise CodecError(f"malformed vehicle: {e}") from None
+    if t == "csr":
+        return _csr(tree)
     if t == "tensor":
         torch = _torch()
         x = torch.from_numpy(np.array(decode(tree["v"])))

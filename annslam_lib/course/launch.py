@@ -28,6 +28,7 @@ NOT_ON_COLAB = {
     "07_ann_training": "it needs the course's pinned PyTorch build",
     "08_ann_slam_verdict": "it needs the course's pinned PyTorch build",
     "10_beyond_the_ekf": "it needs GTSAM, which Colab does not install",
+    "11_graph_slam": "it needs GTSAM, which Colab does not install",
 }
 _GITHUB = re.compile(r"^https://github\.com/([A-Za-z0-9_.-]+)/([A-Za-z0-9_.-]+?)(?:\.git)?/?$")
 _REF = re.compile(r"^[A-Za-z0-9._/-]+$")

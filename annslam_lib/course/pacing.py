@@ -30,7 +30,7 @@ MINUTES_PER_POINT_OF = {"09_capstone": 20}
 #: The optional modules a class may leave out (INSTRUCTOR.md's plans, the course map); every
 #: other chapter is the core.
 OPTIONAL_MODULES = {"paper": ("07_ann_training", "08_ann_slam_verdict"),
-                    "beyond": ("10_beyond_the_ekf",)}
+                    "beyond": ("10_beyond_the_ekf", "11_graph_slam")}
 
 
 def module_of(notebook: str) -> str:

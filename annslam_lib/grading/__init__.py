@@ -18,6 +18,7 @@ known mistakes (including the paper's misprinted equations):
 - ``verdict``: chapter 08 (the verdict)
 - ``capstone``: chapter 09 (a student's whole EKF-SLAM loop, scored on unseen runs)
 - ``smoothing``: chapter 10 (factor graphs)
+- ``graph_slam``: chapter 11 (graph-SLAM from scratch)
 
 :func:`forget_results` drops the whole-loop results the checks of 04a and 09 keep per
 student function and run (a grader calls it after each submission).
@@ -30,4 +31,4 @@ __all__ = ["NOT_WRITTEN", "GradingError", "Mistake", "call", "check_function", "
            "check_raises", "describe", "fail", "fmt", "forget_results",
            "core", "kinematics", "kalman", "observation", "association", "localisation",
            "localisation_loop", "ekf", "diagnose", "metrics", "ann", "verdict", "capstone",
-           "smoothing"]
+           "smoothing", "graph_slam"]

@@ -38,8 +38,8 @@ from ..models.observation import observe
 from .problem import GraphProblem, check_problem
 from .solve import SmoothingResult, SolverError
 
-__all__ = ["se2_log_jacobian", "linearise", "information_matrix", "solve_gauss_newton",
-           "cost", "huber"]
+__all__ = ["se2_log_jacobian", "linearise", "information_matrix", "step",
+           "solve_gauss_newton", "cost", "huber"]
 
 
 def se2_log_jacobian(u, theta) -> tuple[np.ndarray, np.ndarray]:
@@ -218,6 +218,44 @@ def information_matrix(problem: GraphProblem, poses=None, landmarks=None) -> sp.
     return (J.T @ J).tocsc()
 
 
+def _normal_step(J, e, K: int | None) -> np.ndarray:
+    """dx of (J^T J) dx = -J^T e by a sparse LU factorisation (COLAMD ordering); a
+    singular J^T J raises :class:`SolverError` naming the variable (with ``K``, the number
+    of poses: pose or landmark)."""
+    H = (J.T @ J).tocsc()
+    g = J.T @ e
+
+    def named(i: int) -> str:
+        return _variable(i, K) if K is not None else f"unknown {i}"
+
+    try:
+        lu = spla.splu(H, permc_spec="COLAMD")
+    except RuntimeError as err:
+        empty = np.flatnonzero(H.diagonal() == 0)
+        where = f" at {named(int(empty[0]))}" if empty.size else ""
+        raise SolverError(f"the information matrix is singular{where} ({err}): an "
+                          "under-determined graph (no prior, or a landmark the factors "
+                          "do not pin down)") from err
+    pivots = np.abs(lu.U.diagonal())
+    if pivots.min() <= 1e-12 * pivots.max():
+        bad = int(lu.perm_c[int(np.argmin(pivots))])
+        raise SolverError(f"the information matrix is singular at {named(bad)}: an "
+                          "under-determined graph (no prior, or a landmark the factors do "
+                          "not pin down)")
+    return -lu.solve(g)
+
+
+def step(J, e) -> np.ndarray:
+    """One Gauss-Newton step, eq. (11.4) of chapter 11: dx solving (J^T J) dx = -J^T e for
+    a sparse Jacobian J (m, n) and whitened errors e (m,); a singular J^T J raises
+    :class:`SolverError`."""
+    J = sp.csr_matrix(J)
+    e = _checks.array("e", e)
+    if e.shape != (J.shape[0],):
+        raise ValueError(f"e must have shape ({J.shape[0]},) for J {J.shape}, got {e.shape}")
+    return _normal_step(J, e, None)
+
+
 def _variable(index: int, K: int) -> str:
     return f"pose {index // 3}" if index < 3 * K else f"landmark {(index - 3 * K) // 2}"
 
@@ -252,34 +290,18 @@ def solve_gauss_newton(problem: GraphProblem, poses=None, landmarks=None, *,
             raise SolverError(f"Gauss-Newton did not converge in {max_iterations} iterations "
                               f"(cost {f0:.6g} -> {f:.6g})")
         it += 1
-        H = (J.T @ J).tocsc()
-        g = J.T @ e
-        try:
-            lu = spla.splu(H, permc_spec="COLAMD")
-        except RuntimeError as err:
-            empty = np.flatnonzero(H.diagonal() == 0)
-            where = f" at {_variable(int(empty[0]), K)}" if empty.size else ""
-            raise SolverError(f"the information matrix is singular{where} ({err}): an "
-                              "under-determined graph (no prior, or a landmark the factors "
-                              "do not pin down)") from err
-        pivots = np.abs(lu.U.diagonal())
-        if pivots.min() <= 1e-12 * pivots.max():
-            bad = int(lu.perm_c[int(np.argmin(pivots))])
-            raise SolverError(f"the information matrix is singular at {_variable(bad, K)}: "
-                              "an under-determined graph (no prior, or a landmark the factors "
-                              "do not pin down)")
-        dx = -lu.solve(g)
-        step = 1.0
+        dx = _normal_step(J, e, K)
+        frac = 1.0
         while True:
-            xn = x + step * dx[:3 * K].reshape(K, 3)
+            xn = x + frac * dx[:3 * K].reshape(K, 3)
             xn[:, 2] = wrap_angle(xn[:, 2])
-            mn = m + step * dx[3 * K:].reshape(-1, 2)
+            mn = m + frac * dx[3 * K:].reshape(-1, 2)
             fn, en, Jn = _robust(*_linearise(problem, xn, mn), huber_k)
             if not math.isfinite(fn):
                 raise SolverError(f"Gauss-Newton reached a non-finite cost at iteration {it}")
-            if fn <= f or step < 1e-3:
+            if fn <= f or frac < 1e-3:
                 break
-            step *= 0.5
+            frac *= 0.5
         done = f - fn <= relative_tol * max(f, 1e-300)
         x, m, e, J, f = xn, mn, en, Jn, fn
         if done:
