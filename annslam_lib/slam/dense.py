@@ -179,10 +179,14 @@ class DenseEkfSlam:
         self.P = IKH @ self.P @ IKH.T + K @ R @ K.T
         return nis
 
-    def update(self, z, lm, sigma_range: float, sigma_bearing: float):
+    @staticmethod
+    def _update_inputs(z, lm, sigma_range: float, sigma_bearing: float):
+        """An update's detections (n, 2) and landmark indices (n,), checked."""
         check_sigmas("update", sigma_range, sigma_bearing)
-        z = check_z("update", z)
-        lm = np.asarray(lm, dtype=np.int64).ravel()
+        return check_z("update", z), np.asarray(lm, dtype=np.int64).ravel()
+
+    def update(self, z, lm, sigma_range: float, sigma_bearing: float):
+        z, lm = self._update_inputs(z, lm, sigma_range, sigma_bearing)
         if lm.size == 0:
             return 0.0, 0
         zhat, H = self._jacobian(lm)

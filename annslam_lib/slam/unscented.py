@@ -292,11 +292,7 @@ def ukf_backend():
             return zhat, S
 
         def update(self, z, lm, sigma_range: float, sigma_bearing: float):
-            from .base import check_sigmas, check_z
-
-            check_sigmas("update", sigma_range, sigma_bearing)
-            z = check_z("update", z)
-            lm = np.asarray(lm, dtype=np.int64).ravel()
+            z, lm = self._update_inputs(z, lm, sigma_range, sigma_bearing)
             if lm.size == 0:
                 return 0.0, 0
             zhat, S, Pxz = self._measure(lm, [sigma_range**2, sigma_bearing**2])
