@@ -27,10 +27,10 @@ def _text(output) -> str:
 
 
 def test_the_course_has_its_chapters():
-    """Chapters 00-10, each once, and the ones inserted between them (01a, 04a, 05a) lettered."""
+    """Chapters 00-11, each once, and the ones inserted between them (01a, 04a, 05a) lettered."""
     names = [p.name for p in NOTEBOOKS]
     assert all(re.fullmatch(r"\d\d[a-z]?_[a-z0-9_]+\.ipynb", n) for n in names), names
-    assert sorted({n[:2] for n in names}) == [f"{i:02d}" for i in range(11)]
+    assert sorted({n[:2] for n in names}) == [f"{i:02d}" for i in range(12)]
     assert [n.split("_")[0] for n in names if not n[2] == "_"] == ["01a", "04a", "05a"]
 
 

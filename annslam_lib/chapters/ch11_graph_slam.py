@@ -155,7 +155,7 @@ def path_figure(problem: gp.GraphProblem, plain, huber, clean):
             label="5 % wrong, least squares")
     ax.plot(huber.poses[:, 0], huber.poses[:, 1], color="0.55", ls="--", lw=1,
             label="5 % wrong, Huber's loss")
-    ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal",
-           title="the Car Park path with wrong associations")
+    ax.set(xlabel="x [m]", ylabel="y [m]", title="the Car Park path with wrong associations")
+    ax.set_aspect("equal", adjustable="datalim")          # equal scales, the full width
     ax.legend()
     return fig
