@@ -210,11 +210,12 @@ def test_a_student_joins_mid_term_and_leaves_with_their_files_kept(class_hub):
                               capture_output=True).returncode == 1     # no process left
         assert (home / "course" / "mine.txt").read_text() == "my notes"
         assert f"# dropped: {new}" in class_file.read_text().splitlines()
-        # dropping again, or a name never in the class: refused, saying so
-        again = subprocess.run([sys.executable, "-m", "annslam_lib", "class", "drop", new],
+        # dropping again finishes the job (nothing to undo); a name never in the class: refused
+        assert "already dropped" in _roster(h, "drop", new)
+        never = subprocess.run([sys.executable, "-m", "annslam_lib", "class", "drop", "nobodyz"],
                                env=dict(os.environ, ANNSLAM_HUB_DIR=str(h.layout.root)),
                                capture_output=True, text=True, timeout=120)
-        assert again.returncode == 2 and "is not in the class" in again.stderr
+        assert never.returncode == 2 and "is not in the class" in never.stderr
         _roster(h, "add", new)
         assert h.api.login(new, pw) == 302 and not _expired(new)
         h.api.start_server(new)

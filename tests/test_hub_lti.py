@@ -210,6 +210,31 @@ def test_the_hub_refuses_a_launch_it_must_not_trust(lti_hub, launch, status, wor
     assert _open(browser, hub + "/hub/home")[0] == 302       # not logged in
 
 
+def test_no_login_without_the_lms_token(lti_hub):
+    """JupyterHub hands its login form's fields and the token API's "auth" body to the
+    authenticator too: a forged set of claims there logs nobody in and makes no token."""
+    platform, hub, token, _ = lti_hub
+    forged = {"https://purl.imsglobal.org/spec/lti/claim/deployment_id": platform.deployment,
+              "https://purl.imsglobal.org/spec/lti/claim/context": {"id": platform.course},
+              "https://purl.imsglobal.org/spec/lti/claim/roles": [INSTRUCTOR],
+              "email": "teacher"}
+    for name in ("alice", "teacher"):
+        req = urllib.request.Request(hub + f"/hub/api/users/{name}/tokens",
+                                     data=json.dumps({"auth": forged}).encode(), method="POST",
+                                     headers={"Content-Type": "application/json"})
+        try:
+            with urllib.request.urlopen(req, timeout=10) as r:
+                status = r.status
+        except urllib.error.HTTPError as e:
+            status = e.code
+        assert status == 403, (name, status)
+    browser = _browser()
+    _open(browser, hub + "/hub/login")
+    status, _, _ = _open(browser, hub + "/hub/login", {"email": "alice@uni.example",
+                                                       "username": "alice"})
+    assert status != 302 and _open(browser, hub + "/hub/home")[0] == 302
+
+
 def test_the_instructor_arrives_with_the_lms_instructor_role(lti_hub):
     platform, hub, token, _ = lti_hub
     status, browser, text = _launch(platform, hub, Launch("teacher", roles=(INSTRUCTOR,)))

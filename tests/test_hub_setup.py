@@ -532,7 +532,29 @@ def test_class_add_and_drop_edit_the_class_file_the_hub_started_with(tmp_path):
     assert "they had no account yet" in roster.drop(layout, "bob")
     assert hub.read_class(f) == ["alice", "carol"]
     assert "# dropped: bob" in f.read_text().splitlines()
+    assert "already dropped: finished again" in roster.drop(layout, "bob")   # idempotent
+    assert f.read_text().count("# dropped: bob") == 1
     with pytest.raises(hub.HubError, match="is not in the class"):
-        roster.drop(layout, "bob")
+        roster.drop(layout, "dave")
+    with pytest.raises(hub.HubError, match="not a user name"):
+        roster.add(layout, "eve\n")                         # a trailing newline is no name
     roster.add(layout, "bob")
     assert hub.read_class(f) == ["alice", "carol", "bob"]
+
+
+def test_the_class_file_decides_every_login_and_server_start(tmp_path, monkeypatch):
+    """A login (post_auth_hook) or a server start (pre_spawn) of a name the class file no
+    longer lists is refused, whatever JupyterHub's database still holds."""
+    from types import SimpleNamespace
+
+    f = tmp_path / "class.txt"
+    f.write_text("alice\n# dropped: bob\n")
+    monkeypatch.setenv("ANNSLAM_HUB_CLASS", str(f))
+    monkeypatch.setenv("ANNSLAM_HUB_INSTRUCTOR", "teacher")
+    assert hub_config.class_gate(None, None, {"name": "alice"}) == {"name": "alice"}
+    assert hub_config.class_gate(None, None, {"name": "teacher"}) == {"name": "teacher"}
+    assert hub_config.class_gate(None, None, {"name": "bob"}) is None
+    with pytest.raises(hub.HubError, match="'bob' is not in the class"):
+        hub_config.pre_spawn(SimpleNamespace(user=SimpleNamespace(name="bob")))
+    c = _configured(tmp_path)
+    assert c.Authenticator.post_auth_hook is hub_config.class_gate

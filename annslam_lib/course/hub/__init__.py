@@ -68,7 +68,7 @@ COURSE_ID = "annslam"
 #: GECOS field of the accounts the course creates: an existing account without it is not
 #: the course's, and a class list naming it (``root``, ``www-data``, a colleague) is refused.
 MARK = "annslam course account"
-_NAME = re.compile(r"^[a-z][a-z0-9_-]{0,30}$")
+_NAME = re.compile(r"[a-z][a-z0-9_-]{0,30}\Z")      # \Z: no trailing newline slips by
 
 #: JupyterLab plugins and server extensions of nbgrader a student does not get.
 STUDENT_DISABLED = {

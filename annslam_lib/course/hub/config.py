@@ -36,7 +36,7 @@ from pathlib import Path
 from ... import _settings
 from . import HubError, HubLayout, ensure_account, give_course, limits, lti, read_class, server_env
 
-__all__ = ["configure", "check_spawner", "pre_spawn", "idle_culler", "REFUSED_SPAWNERS",
+__all__ = ["configure", "check_spawner", "pre_spawn", "in_class", "class_gate", "idle_culler", "REFUSED_SPAWNERS",
            "SETTINGS", "IDLE_TIMEOUT", "IDLE_EVERY"]
 
 #: The environment variables ``python -m annslam_lib hub`` sets for the config file, with
@@ -63,9 +63,26 @@ def _role(spawner) -> str:
     return "instructor" if spawner.user.name == instructor else "student"
 
 
+def in_class(name: str, env=None) -> bool:
+    """``name`` is the instructor or on the class file now (``class add`` and ``class drop``
+    change it while the hub runs; JupyterHub's own allow-list is only its start's)."""
+    instructor = _settings.hub_instructor(env)
+    class_file = _settings.hub_class(env)
+    return name == instructor or (class_file is not None
+                                  and name in read_class(class_file, instructor))
+
+
+def class_gate(authenticator, handler, authentication):
+    """``post_auth_hook``: a login of a name not in the class now is refused (None)."""
+    return authentication if in_class(authentication["name"]) else None
+
+
 def pre_spawn(spawner) -> None:
     """Before a server starts: the user's account (created on the first start), its folder
-    ``~/course`` as the server's root, and the role's environment."""
+    ``~/course`` as the server's root, and the role's environment. A user no longer in the
+    class (dropped while the hub kept them) gets no server."""
+    if not in_class(spawner.user.name):
+        raise HubError(f"{spawner.user.name!r} is not in the class: no server")
     layout = HubLayout.from_env()
     entry = ensure_account(spawner.user.name)
     spawner.notebook_dir = str(Path(entry.pw_dir) / "course")
@@ -105,6 +122,7 @@ def configure(c, env=None) -> None:
         c.SharedPasswordAuthenticator.user_password = _settings.hub_password(env)
         c.SharedPasswordAuthenticator.admin_password = _settings.hub_instructor_password(env)
     c.Authenticator.allowed_users = set(students)
+    c.Authenticator.post_auth_hook = class_gate
     c.Authenticator.admin_users = {instructor}
 
     # LocalProcessSpawner with its memory, CPU and process limits enforced (limits)

@@ -29,6 +29,7 @@ from __future__ import annotations
 import tomllib
 from dataclasses import dataclass, fields
 from pathlib import Path
+from urllib.parse import urlsplit
 
 from . import HubError, HubLayout, check_name
 
@@ -82,7 +83,9 @@ def read_settings(path) -> LTISettings:
     settings = LTISettings(**{k: str(v).strip() for k, v in raw.items()})
     for key in ("issuer", "authorize_url", "jwks_url"):
         url = getattr(settings, key)
-        if not (url.startswith("https://") or url.startswith("http://127.0.0.1:")):
+        parts = urlsplit(url)
+        if not (parts.scheme == "https" and parts.hostname and not parts.username) and not (
+                parts.scheme == "http" and parts.hostname == "127.0.0.1" and not parts.username):
             raise HubError(f"{path}: {key} = {url!r} must be an https:// address (the "
                            "LMS's keys and tokens must not travel in the clear)")
     return settings
@@ -93,13 +96,18 @@ def _roster_names(layout: HubLayout) -> dict[str, str]:
     last lower-cased) to its hub user name."""
     from .gradebook import read_roster
 
-    names = {}
+    names: dict[str, str | None] = {}
+
+    def put(value: str, username: str) -> None:
+        # an identifier two students share names neither (None): no silent last-row-wins
+        names[value] = username if names.get(value, username) == username else None
+
     for username, row in read_roster(layout.course / "roster.csv").items():
         for key in ("lms_id", "sis_id", "email"):
             value = (row.get(key) or "").strip()
             if value:
-                names[value.lower() if key == "email" else value] = username
-        names[username] = username
+                put(value.lower() if key == "email" else value, username)
+        put(username, username)
     return names
 
 
@@ -112,14 +120,14 @@ def hub_name(claims: dict, settings: LTISettings, layout: HubLayout) -> str | No
     if not value:
         return None
     roster = _roster_names(layout)
-    name = roster.get(value) or roster.get(value.lower())
-    if name is None:
-        try:
-            check_name(value)
-        except HubError:
-            return None
-        name = value
-    return name
+    key = value if value in roster else value.lower()
+    if key in roster:
+        return roster[key]                     # None for an identifier two rows share
+    try:
+        check_name(value)
+    except HubError:
+        return None
+    return value
 
 
 def check_launch(claims: dict, settings: LTISettings, layout: HubLayout,
@@ -143,6 +151,7 @@ def authenticator_class():
     """:class:`CourseLTIAuthenticator`, made on first use (ltiauthenticator and JupyterHub
     are the hub's packages, not the library's)."""
     from ltiauthenticator.lti13.auth import LTI13Authenticator
+    from ltiauthenticator.lti13.handlers import LTI13CallbackHandler
     from tornado import web
     from traitlets import Unicode
 
@@ -154,6 +163,12 @@ def authenticator_class():
         settings_file = Unicode(config=True, help="the LTI settings file (TOML)")
 
         async def authenticate(self, handler, data=None):
+            # JupyterHub also calls authenticate() from its login form and from the token
+            # API (POST /hub/api/users/NAME/tokens with an "auth" body), with data the caller
+            # wrote: only the LTI callback, which verified the LMS's signed token, may log in.
+            if not isinstance(handler, LTI13CallbackHandler) or not isinstance(data, dict) \
+                    or not isinstance(data.get(CONTEXT), dict):
+                raise web.HTTPError(403, "log in from the LMS: this hub takes no other login")
             settings = read_settings(self.settings_file)
             name, why = check_launch(data or {}, settings, HubLayout.from_env(),
                                      _settings.hub_instructor())

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import pwd
+import shutil
 import subprocess
 from pathlib import Path
 
@@ -50,7 +51,8 @@ def _hub(layout: HubLayout):
 
 def _account(name: str, *args: str) -> None:
     if account_status(name) == "course":
-        out = subprocess.run(["usermod", *args, name], capture_output=True, text=True)
+        usermod = shutil.which("usermod") or "/usr/sbin/usermod"
+        out = subprocess.run([usermod, *args, name], capture_output=True, text=True)
         if out.returncode != 0:
             raise HubError(f"usermod {' '.join(args)} {name}: {out.stderr.strip()}")
 
@@ -78,14 +80,16 @@ def add(layout: HubLayout, name: str, instructor: str = "instructor") -> str:
 
 
 def drop(layout: HubLayout, name: str, instructor: str = "instructor") -> str:
-    """``name`` out of the class, files kept (module docstring); what was done."""
+    """``name`` out of the class, files kept (module docstring); what was done. The hub,
+    the account and its processes are dealt with before the class file changes, so that a
+    failure half-way leaves the name in the class and ``drop`` can be run again; a name
+    already marked dropped is finished again (its hub user, expiry and processes)."""
     check_name(name)
     path = class_file(layout)
-    if name not in read_class(path, instructor):
-        raise HubError(f"{name!r} is not in the class ({path})")
     lines = path.read_text().splitlines()
-    kept = [DROPPED + name if line.split("#", 1)[0].strip() == name else line for line in lines]
-    path.write_text("\n".join(kept) + "\n")
+    dropped_before = DROPPED + name in lines
+    if name not in read_class(path, instructor) and not dropped_before:
+        raise HubError(f"{name!r} is not in the class ({path})")
     hub = _hub(layout)
     if hub is not None:
         status, body = hub.request("DELETE", f"/hub/api/users/{name}", timeout=120)
@@ -96,6 +100,16 @@ def drop(layout: HubLayout, name: str, instructor: str = "instructor") -> str:
         entry = pwd.getpwnam(name)
         home = entry.pw_dir
         _account(name, "--expiredate", "1")
-        subprocess.run(["pkill", "-KILL", "-U", str(entry.pw_uid)], capture_output=True)
+        pkill = shutil.which("pkill") or "/usr/bin/pkill"
+        for _ in range(20):                  # until nothing of theirs runs (forks included)
+            subprocess.run([pkill, "-KILL", "-U", str(entry.pw_uid)], capture_output=True)
+            if subprocess.run([shutil.which("pgrep") or "/usr/bin/pgrep", "-U",
+                               str(entry.pw_uid)], capture_output=True).returncode == 1:
+                break
+    if not dropped_before:
+        kept = [DROPPED + name if line.split("#", 1)[0].strip() == name else line
+                for line in lines]
+        path.write_text("\n".join(kept) + "\n")
     files = f"their files stay in {home}" if home else "they had no account yet"
-    return f"{name} dropped from the class ({path}): logins refused, {files}"
+    again = " (already dropped: finished again)" if dropped_before else ""
+    return f"{name} dropped from the class ({path}){again}: logins refused, {files}"
